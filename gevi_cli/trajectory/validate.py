@@ -95,4 +95,9 @@ def validate_rows(path, lines, t_ns, positions, quat_wxyz=None, rotations=None, 
         warnings.append(
             f"{path}:{lines[r]}: {int(off.sum())} quaternion(s) off unit norm (first: |q| = {norms[r]:.6f}); renormalized"
         )
-    return quat_wxyz / norms[:, None]
+    # Rows within 1e-5 of unit norm keep their written values, so converting a file does not
+    # change its numbers; the rest are renormalized (and warned about above when > 1e-3 off).
+    fix = np.abs(norms - 1.0) > 1e-5
+    out = quat_wxyz.copy()
+    out[fix] /= norms[fix, None]
+    return out

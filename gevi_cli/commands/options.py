@@ -1,0 +1,39 @@
+"""Click options shared by commands that open a sequence."""
+from __future__ import annotations
+
+import click
+
+sequence_options = [
+    click.option("--kind", default=None, help="Force the dataset kind (euroc, pool, kitti, rosbag); default: detect."),
+    click.option("--groundtruth", "groundtruth", type=click.Path(dir_okay=False), default=None,
+                 help="Ground-truth trajectory file overriding the dataset's own (any format gevi reads)."),
+    click.option("--calib", default=None, type=click.Path(), help="Bags: Kalibr camchain YAML or EuRoC mav0 folder."),
+    click.option("--topics", default=None, help="Bags: left=/cam0/image_raw,right=/cam1/image_raw,imu=/imu0,gt=/pose"),
+    click.option("--cameras", type=click.Choice(["gray", "color"]), default=None, help="KITTI: which stereo pair."),
+]
+
+
+def add_sequence_options(func):
+    for option in reversed(sequence_options):
+        func = option(func)
+    return func
+
+
+def sequence_kwargs(groundtruth=None, calib=None, topics=None, cameras=None) -> dict:
+    """Reader options from the CLI values (only those given)."""
+    from gevi_cli.errors import GeviError
+
+    options = {}
+    if groundtruth is not None:
+        import pathlib
+
+        if not pathlib.Path(groundtruth).is_file():
+            raise GeviError("--groundtruth", f"{groundtruth}: no such file")
+        options["groundtruth"] = groundtruth
+    if calib is not None:
+        options["calib"] = calib
+    if topics is not None:
+        options["topics"] = topics
+    if cameras is not None:
+        options["cameras"] = cameras
+    return options

@@ -1,0 +1,158 @@
+"""Calibration of a stereo rig with an IMU: typed, frozen, with rectification derived once.
+
+Frames: ``B`` = body = IMU frame; ``C0``/``C1`` = left/right camera (x right, y down, z forward).
+``T_B_C0`` maps left-camera coordinates into the body frame (the EuRoC ``T_BS`` of cam0).
+Intrinsics are in pixels; translations in metres.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import cv2
+import numpy as np
+
+DISTORTION_MODELS = ("radtan", "equidistant", "none")
+
+
+def invert_pose(T: np.ndarray) -> np.ndarray:
+    """Inverse of a 4x4 rigid transform."""
+    Ti = np.eye(4)
+    Ti[:3, :3] = T[:3, :3].T
+    Ti[:3, 3] = -T[:3, :3].T @ T[:3, 3]
+    return Ti
+
+
+@dataclass(frozen=True)
+class PinholeCamera:
+    """One camera: pinhole intrinsics (pixels), lens distortion and its pose in the body frame.
+
+    ``distortion`` holds (k1, k2, p1, p2) for radtan, (k1, k2, k3, k4) for equidistant, () for none.
+    """
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    distortion_model: str = "none"
+    distortion: tuple[float, ...] = ()
+    T_B_C: np.ndarray = field(default_factory=lambda: np.eye(4), compare=False)
+
+    def __post_init__(self):
+        if self.distortion_model not in DISTORTION_MODELS:
+            raise ValueError(f"distortion model {self.distortion_model!r} is not one of {DISTORTION_MODELS}")
+        object.__setattr__(self, "T_B_C", np.asarray(self.T_B_C, dtype=np.float64).reshape(4, 4))
+        object.__setattr__(self, "distortion", tuple(float(d) for d in self.distortion))
+
+    @property
+    def K(self) -> np.ndarray:
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def resolution(self) -> tuple[int, int]:
+        return self.width, self.height
+
+    @property
+    def dist_coeffs(self) -> np.ndarray:
+        return np.array(self.distortion, dtype=np.float64)
+
+    def undistort_points(self, uv: np.ndarray) -> np.ndarray:
+        """Pixels (n, 2) -> normalized image coordinates (n, 2) of the ideal pinhole camera."""
+        uv = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 1, 2)
+        if self.distortion_model == "equidistant":
+            out = cv2.fisheye.undistortPoints(uv, self.K, self.dist_coeffs)
+        elif self.distortion_model == "radtan":
+            out = cv2.undistortPoints(uv, self.K, self.dist_coeffs)
+        else:
+            out = (uv - [self.cx, self.cy]) / [self.fx, self.fy]
+        return out.reshape(-1, 2)
+
+
+@dataclass(frozen=True)
+class Rectification:
+    """Stereo rectification computed once by OpenCV (``stereoRectify`` + ``initUndistortRectifyMap``).
+
+    ``R0``/``R1`` rotate each original camera frame into its rectified frame; ``K`` is the shared
+    rectified intrinsic matrix (pixels); ``baseline`` in metres; the maps remap raw images into
+    rectified ones with ``cv2.remap``.
+    """
+
+    R0: np.ndarray
+    R1: np.ndarray
+    P0: np.ndarray
+    P1: np.ndarray
+    K: np.ndarray
+    baseline: float
+    size: tuple[int, int]
+    map0: tuple[np.ndarray, np.ndarray]
+    map1: tuple[np.ndarray, np.ndarray]
+
+    def rectify(self, left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return (
+            cv2.remap(left, *self.map0, interpolation=cv2.INTER_LINEAR),
+            cv2.remap(right, *self.map1, interpolation=cv2.INTER_LINEAR),
+        )
+
+
+@dataclass(frozen=True)
+class StereoRig:
+    """Left (cam0) and right (cam1) camera with their body-frame extrinsics."""
+
+    cam0: PinholeCamera
+    cam1: PinholeCamera
+
+    @property
+    def T_B_C0(self) -> np.ndarray:
+        return self.cam0.T_B_C
+
+    @property
+    def T_B_C1(self) -> np.ndarray:
+        return self.cam1.T_B_C
+
+    @cached_property
+    def T_C1_C0(self) -> np.ndarray:
+        """Left -> right camera: ``X_R = R_rl X_L + t_rl`` (spec section 1)."""
+        return invert_pose(self.T_B_C1) @ self.T_B_C0
+
+    @property
+    def R_rl(self) -> np.ndarray:
+        return self.T_C1_C0[:3, :3]
+
+    @property
+    def t_rl(self) -> np.ndarray:
+        return self.T_C1_C0[:3, 3]
+
+    @property
+    def baseline(self) -> float:
+        """Distance between the two optical centres (metres)."""
+        return float(np.linalg.norm(self.t_rl))
+
+    @cached_property
+    def rectification(self) -> Rectification:
+        size = self.cam0.resolution
+        R, t = self.R_rl, self.t_rl.reshape(3, 1)
+        if self.cam0.distortion_model == "equidistant":
+            R0, R1, P0, P1, _ = cv2.fisheye.stereoRectify(
+                self.cam0.K, self.cam0.dist_coeffs, self.cam1.K, self.cam1.dist_coeffs, size, R, t,
+                flags=cv2.CALIB_ZERO_DISPARITY, newImageSize=size, balance=0.0, fov_scale=1.0,
+            )
+            init = cv2.fisheye.initUndistortRectifyMap
+        else:
+            R0, R1, P0, P1, _, _, _ = cv2.stereoRectify(
+                self.cam0.K, self.cam0.dist_coeffs, self.cam1.K, self.cam1.dist_coeffs, size, R, t,
+                flags=cv2.CALIB_ZERO_DISPARITY, alpha=0,
+            )
+            init = cv2.initUndistortRectifyMap
+        map0 = init(self.cam0.K, self.cam0.dist_coeffs, R0, P0, size, cv2.CV_32FC1)
+        map1 = init(self.cam1.K, self.cam1.dist_coeffs, R1, P1, self.cam1.resolution, cv2.CV_32FC1)
+        K = P0[:3, :3].copy()
+        return Rectification(R0, R1, P0, P1, K, float(-P1[0, 3] / P1[0, 0]), size, tuple(map0), tuple(map1))
+
+    def summary(self) -> str:
+        c0 = self.cam0
+        return (
+            f"{c0.width}x{c0.height}, fx {c0.fx:.3f} fy {c0.fy:.3f} cx {c0.cx:.3f} cy {c0.cy:.3f}, "
+            f"distortion {c0.distortion_model}, baseline {self.baseline:.3f} m"
+        )

@@ -1,0 +1,140 @@
+"""What every dataset reader returns: a :class:`Sequence` and its typed pieces.
+
+Stamps are int64 nanoseconds; images uint8 grayscale; IMU in the body (= IMU) frame, gyro rad/s,
+accelerometer m/s^2 (specific force).  Ground truth is a :class:`~gevi_cli.trajectory.Trajectory`
+of body poses ``T_W_B`` unless its ``frame`` says otherwise (KITTI: cam0 = body).
+"""
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass, field
+from typing import Iterator
+
+import numpy as np
+
+from gevi_cli.datasets.calibration import StereoRig
+from gevi_cli.trajectory import Trajectory
+
+
+@dataclass(frozen=True)
+class StereoFrame:
+    """One synchronised stereo pair; ``t_ns`` is the left image stamp (ns)."""
+
+    t_ns: int
+    left: np.ndarray
+    right: np.ndarray
+
+
+@dataclass(frozen=True)
+class ImuData:
+    """IMU samples in the body frame with the continuous-time noise parameters of the calibration.
+
+    Noise densities: gyro rad/s/sqrt(Hz), accel m/s^2/sqrt(Hz); random walks: rad/s^2/sqrt(Hz),
+    m/s^3/sqrt(Hz).  ``None`` where the calibration does not give them.
+    """
+
+    t_ns: np.ndarray
+    gyro: np.ndarray
+    acc: np.ndarray
+    gyro_noise_density: float | None = None
+    gyro_random_walk: float | None = None
+    acc_noise_density: float | None = None
+    acc_random_walk: float | None = None
+
+    def __len__(self) -> int:
+        return len(self.t_ns)
+
+    @property
+    def rate_hz(self) -> float:
+        return rate_hz(self.t_ns)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.t_ns[-1] - self.t_ns[0]) * 1e-9 if len(self) > 1 else 0.0
+
+    def between(self, t0_ns: int, t1_ns: int) -> "ImuData":
+        """Samples with ``t0_ns <= t <= t1_ns``."""
+        i0, i1 = np.searchsorted(self.t_ns, [t0_ns, t1_ns], side="left")
+        i1 = np.searchsorted(self.t_ns, t1_ns, side="right")
+        return ImuData(self.t_ns[i0:i1], self.gyro[i0:i1], self.acc[i0:i1], self.gyro_noise_density,
+                       self.gyro_random_walk, self.acc_noise_density, self.acc_random_walk)
+
+
+def rate_hz(t_ns: np.ndarray) -> float:
+    """Nominal rate from the median sample period (robust to dropped frames)."""
+    if len(t_ns) < 2:
+        return 0.0
+    return float(1e9 / np.median(np.diff(t_ns)))
+
+
+class Sequence(abc.ABC):
+    """A recorded stereo(-inertial) sequence, opened by one of the registered readers.
+
+    Implementations read metadata eagerly (stamps, calibration, IMU, ground truth) and images lazily.
+    """
+
+    kind: str = ""
+
+    def __init__(self):
+        self.warnings: list[str] = []
+
+    @property
+    @abc.abstractmethod
+    def name(self) -> str: ...
+
+    @property
+    @abc.abstractmethod
+    def calibration(self) -> StereoRig: ...
+
+    @property
+    @abc.abstractmethod
+    def stamps_ns(self) -> np.ndarray:
+        """(n,) int64 stamps of the stereo pairs, increasing."""
+
+    @abc.abstractmethod
+    def _read_pair(self, index: int) -> StereoFrame:
+        """Load stereo pair ``index`` (0 <= index < len(self))."""
+
+    @property
+    def imu(self) -> ImuData | None:
+        return None
+
+    @property
+    def groundtruth(self) -> Trajectory | None:
+        return None
+
+    def __len__(self) -> int:
+        return len(self.stamps_ns)
+
+    def frames(self, start: int | None = None, stop: int | None = None, step: int = 1) -> Iterator[StereoFrame]:
+        """Lazily iterate stereo pairs ``start:stop:step`` (indices into :attr:`stamps_ns`)."""
+        for index in range(*slice(start, stop, step).indices(len(self))):
+            yield self._read_pair(index)
+
+    @property
+    def frame_rate_hz(self) -> float:
+        return rate_hz(self.stamps_ns)
+
+    @property
+    def duration_s(self) -> float:
+        s = self.stamps_ns
+        return float(s[-1] - s[0]) * 1e-9 if len(s) > 1 else 0.0
+
+
+def pair_by_stamp(left_ns: np.ndarray, right_ns: np.ndarray, tolerance_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices (i_left, i_right) of left/right stamps that are mutual nearest neighbours within tolerance.
+
+    Both inputs sorted.  Pairing by time (never by row index) survives dropped frames on either side.
+    """
+    if len(left_ns) == 0 or len(right_ns) == 0:
+        return np.empty(0, dtype=np.int64), np.empty(0, dtype=np.int64)
+    j = np.searchsorted(right_ns, left_ns)
+    j0 = np.clip(j - 1, 0, len(right_ns) - 1)
+    j1 = np.clip(j, 0, len(right_ns) - 1)
+    best = np.where(np.abs(right_ns[j0] - left_ns) <= np.abs(right_ns[j1] - left_ns), j0, j1)
+    ok = np.abs(right_ns[best] - left_ns) <= tolerance_ns
+    i_left = np.nonzero(ok)[0]
+    i_right = best[ok]
+    # keep one left per right (mutual nearest): first occurrence wins
+    _, first = np.unique(i_right, return_index=True)
+    return i_left[first], i_right[first]
