@@ -9,14 +9,14 @@ from gevi_cli.commands.options import add_sequence_options, sequence_kwargs
 @click.command("info")
 @click.argument("path", type=click.Path())
 @add_sequence_options
-def command(path, kind, groundtruth, calib, topics, cameras):
+def command(path, kind, groundtruth, calib, imu_calib, topics, cameras):
     """Describe the sequence at PATH: kind, sensors, rates, counts, duration, calibration, GT coverage."""
     import numpy as np
 
     from gevi_cli.datasets import open_sequence
     from gevi_cli.datasets.coverage import frame_coverage
 
-    seq = open_sequence(path, kind=kind, **sequence_kwargs(groundtruth, calib, topics, cameras))
+    seq = open_sequence(path, kind=kind, **sequence_kwargs(groundtruth, calib, topics, cameras, imu_calib))
     rig = seq.calibration
     echo = click.echo
     echo(f"sequence      {seq.name}  ({seq.kind})")

@@ -8,6 +8,8 @@ sequence_options = [
     click.option("--groundtruth", "groundtruth", type=click.Path(dir_okay=False), default=None,
                  help="Ground-truth trajectory file overriding the dataset's own (any format gevi reads)."),
     click.option("--calib", default=None, type=click.Path(), help="Bags: Kalibr camchain YAML or EuRoC mav0 folder."),
+    click.option("--imu-calib", "imu_calib", default=None, type=click.Path(dir_okay=False),
+                 help="Bags: Kalibr imu.yaml with the IMU noise model."),
     click.option("--topics", default=None, help="Bags: left=/cam0/image_raw,right=/cam1/image_raw,imu=/imu0,gt=/pose"),
     click.option("--cameras", type=click.Choice(["gray", "color"]), default=None, help="KITTI: which stereo pair."),
 ]
@@ -19,7 +21,7 @@ def add_sequence_options(func):
     return func
 
 
-def sequence_kwargs(groundtruth=None, calib=None, topics=None, cameras=None) -> dict:
+def sequence_kwargs(groundtruth=None, calib=None, topics=None, cameras=None, imu_calib=None) -> dict:
     """Reader options from the CLI values (only those given)."""
     from gevi_cli.errors import GeviError
 
@@ -32,6 +34,8 @@ def sequence_kwargs(groundtruth=None, calib=None, topics=None, cameras=None) -> 
         options["groundtruth"] = groundtruth
     if calib is not None:
         options["calib"] = calib
+    if imu_calib is not None:
+        options["imu_calib"] = imu_calib
     if topics is not None:
         options["topics"] = topics
     if cameras is not None:

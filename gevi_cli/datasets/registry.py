@@ -7,6 +7,7 @@ looks at names of files/folders) and ``__init__(path, **options)``.  Readers are
 from __future__ import annotations
 
 import importlib
+import inspect
 from pathlib import Path
 
 from gevi_cli.errors import GeviError, LayoutError
@@ -67,4 +68,10 @@ def open_sequence(path: str | Path, kind: str | None = None, **options):
         kind = detect_kind(path)
     elif kind not in _READERS:
         raise GeviError("--kind", f"unknown dataset kind {kind!r}; choose one of {', '.join(_READERS)}")
-    return _READERS[kind](Path(path), **options)
+    reader = _READERS[kind]
+    accepted = inspect.signature(reader.__init__).parameters
+    for key in options:
+        if key not in accepted:
+            flag = "--" + key.replace("_", "-")
+            raise GeviError(flag, f"does not apply to {kind} sequences ({path})")
+    return reader(Path(path), **options)

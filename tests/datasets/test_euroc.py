@@ -164,3 +164,8 @@ def test_unreadable_image_names_the_file(euroc_micro, tmp_path):
     with pytest.raises(DataError) as err:
         list(seq.frames())
     assert str(victim) in err.value.where
+
+
+def test_option_of_another_kind_is_a_one_line_error(euroc_micro, capsys):
+    code, _, err = run_cli(["info", euroc_micro, "--calib", euroc_micro / "mav0"], capsys)
+    assert code == 2 and "--calib: does not apply to euroc sequences" in err
