@@ -1,20 +1,11 @@
-"""Shared fixtures: where the read-only real data lives (``../shared/data`` next to the repo)."""
+"""Fixtures for all tests; helpers are in support.py."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-SHARED_DATA = REPO.parent / "shared" / "data"
-
-
-def shared_path(*parts: str) -> Path:
-    """Path under ../shared/data, or skip the test with the reason when it is absent."""
-    path = SHARED_DATA.joinpath(*parts)
-    if not path.exists():
-        pytest.skip(f"real data not available: {path} is absent (the read-only ../shared/data folder next to the repo)")
-    return path
+from support import shared_path
 
 
 @pytest.fixture
@@ -25,16 +16,3 @@ def euroc_micro() -> Path:
 @pytest.fixture
 def trajectories_dir() -> Path:
     return shared_path("trajectories")
-
-
-def run_cli(args, capsys):
-    """Run `gevi ARGS` in-process; return (exit code, stdout, stderr)."""
-    from gevi_cli.cli import main
-
-    try:
-        main(list(map(str, args)))
-        code = 0
-    except SystemExit as exit_:
-        code = exit_.code if isinstance(exit_.code, int) else 1
-    out = capsys.readouterr()
-    return code, out.out, out.err

@@ -4,7 +4,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from conftest import run_cli
+from support import run_cli
 from gevi_cli import __version__
 
 

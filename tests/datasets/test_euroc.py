@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from conftest import run_cli
+from support import run_cli
 from gevi_cli.datasets import open_sequence
 from gevi_cli.datasets.calibration import invert_pose
 from gevi_cli.errors import DataError, GeviError, LayoutError

@@ -5,7 +5,7 @@ import cv2
 import numpy as np
 import pytest
 
-from conftest import run_cli, shared_path
+from support import run_cli, shared_path
 from gevi_cli.datasets import open_sequence
 from gevi_cli.errors import DataError
 from gevi_cli.trajectory import read_trajectory

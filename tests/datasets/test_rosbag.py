@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
-from conftest import run_cli, shared_path
+from support import run_cli, shared_path
 from gevi_cli.datasets import open_sequence
 from gevi_cli.datasets.calibration import invert_pose
 from gevi_cli.datasets.kalibr import read_camchain, write_camchain

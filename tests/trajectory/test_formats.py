@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import run_cli, shared_path
+from support import run_cli, shared_path
 from gevi_cli.errors import DataError
 from gevi_cli.trajectory import Trajectory, detect_format, read_trajectory, write_trajectory
 from gevi_cli.trajectory.stamps import decimal_strings_to_ns
