@@ -1,0 +1,184 @@
+"""Evaluate one estimate against one ground truth: associate, convert frames, align, ATE/RPE/KITTI.
+
+Frames: the estimate is brought into the sensor frame of the ground truth (``body`` = IMU, ``cam0``)
+with ``T_B_C0`` (cam0 -> body) *before* alignment, so ATE, RPE and the KITTI metric all compare the
+same frame.  Units: metres, degrees, seconds.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gevi_cli.errors import GeviError
+from gevi_cli.evaluation.align import Alignment, align
+from gevi_cli.evaluation.associate import Association, associate
+from gevi_cli.evaluation.ate import AteResult, compute_ate
+from gevi_cli.evaluation.kitti_devkit import KittiResult, kitti_errors, raw_poses
+from gevi_cli.evaluation.rpe import RpeResult, compute_rpe
+from gevi_cli.trajectory import Trajectory
+
+#: Translational RPE above this multiple of what the aligned position errors imply flags a frame mix-up.
+FRAME_MIXUP_RATIO = 3.0
+
+
+@dataclass(frozen=True)
+class EvalSettings:
+    """Options shared by every evaluation (see docs/eval.md for the CLI names)."""
+
+    align: str = "auto"
+    n_align: int = -1
+    max_diff_s: float = 0.01
+    t_offset_s: float = 0.0
+    rpe_delta: float = 1.0
+    rpe_unit: str = "frames"
+    min_coverage: float = 0.9
+    est_frame: str = "same"  # "same" (as the GT), "body" or "cam0"
+    kitti: bool = True
+
+    def as_dict(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass
+class PairResult:
+    """The result of one estimate (one trial of one method on one sequence).
+
+    ``status`` is "ok" or "failed"; ``reason`` says why it failed (missing, no valid poses, coverage).
+    """
+
+    method: str
+    sequence: str
+    trial: str
+    path: str | None
+    status: str = "ok"
+    reason: str = ""
+    align: str = ""
+    association: Association | None = None
+    alignment: Alignment | None = None
+    ate: AteResult | None = None
+    rpe: RpeResult | None = None
+    kitti: KittiResult | None = None
+    warnings: list = field(default_factory=list)
+    aligned: Trajectory | None = None  # aligned, matched estimate (for plots)
+
+    @property
+    def ok(self) -> bool:
+        return self.status == "ok"
+
+    def as_dict(self) -> dict:
+        d = {"method": self.method, "sequence": self.sequence, "trial": self.trial, "path": self.path,
+             "status": self.status, "reason": self.reason, "align": self.align, "warnings": list(self.warnings)}
+        if self.association is not None:
+            a = self.association
+            d["association"] = {"matched": a.n_matched, "est_poses": a.n_est, "gt_poses": a.n_gt,
+                                "coverage": a.coverage, "by_index": a.by_index, "summary": a.summary()}
+        if self.alignment is not None:
+            d["alignment"] = self.alignment.as_dict()
+        for key in ("ate", "rpe", "kitti"):
+            val = getattr(self, key)
+            d[key] = val.as_dict() if val is not None else None
+        return d
+
+
+def failed(method: str, sequence: str, trial: str, path, reason: str) -> PairResult:
+    return PairResult(method, sequence, trial, str(path) if path else None, status="failed", reason=reason)
+
+
+def to_gt_frame(est: Trajectory, est_frame: str, gt_frame: str, T_B_C0: np.ndarray | None, where: str) -> Trajectory:
+    """Express estimate poses in the GT sensor frame (cam0 <-> body with ``T_B_C0``)."""
+    if est_frame in ("same", "unknown") or gt_frame in ("unknown", est_frame):
+        return est
+    if T_B_C0 is None:
+        raise GeviError("--est-frame", f"{where}: estimate poses are {est_frame} poses but the ground truth is "
+                                       f"{gt_frame}; pass a dataset as ground truth or --T-B-C0 FILE")
+    if est_frame == "cam0" and gt_frame == "body":
+        return est.with_sensor_frame(np.linalg.inv(T_B_C0), "body")
+    if est_frame == "body" and gt_frame == "cam0":
+        return est.with_sensor_frame(T_B_C0, "cam0")
+    raise GeviError("--est-frame", f"cannot convert {est_frame} poses to {gt_frame}")
+
+
+def frame_mixup_warning(assoc: Association, est_aligned: Trajectory, rpe: RpeResult) -> str | None:
+    """A warning when the translational RPE is far above what the aligned position errors imply.
+
+    For a pair (i, j) of consistent frames, ``|t(E)| <= |e_j - e_i| + angle_i * |q_j - q_i|``; for a
+    working estimate the rotation term is small, so an RPE several times the position-error term that
+    is also a large fraction (>25 %) of the motion itself means the two trajectories describe different
+    sensor frames (cam0 vs body).
+    """
+    if rpe is None or rpe.pairs is None or rpe.unit == "s" or len(rpe.trans_errors) == 0:
+        return None
+    e = est_aligned.positions - assoc.gt.positions
+    j = np.asarray(rpe.pairs, dtype=np.int64)
+    if rpe.unit != "frames":
+        return None
+    i = j - int(rpe.delta)
+    ok = i >= 0
+    i, j = i[ok], j[ok]
+    if len(i) == 0:
+        return None
+    implied = float(np.mean(np.linalg.norm(e[j] - e[i], axis=1)))
+    motion = float(np.mean(np.linalg.norm(assoc.gt.positions[j] - assoc.gt.positions[i], axis=1)))
+    if rpe.trans_mean > FRAME_MIXUP_RATIO * implied + 1e-3 and rpe.trans_mean > 0.25 * motion:
+        return (f"translational RPE {rpe.trans_mean:.4g} m is {rpe.trans_mean / max(implied, 1e-12):.1f}x what the "
+                f"aligned position errors imply ({implied:.3g} m) and {100 * rpe.trans_mean / max(motion, 1e-12):.0f} % "
+                "of the motion: estimate and ground truth probably describe different sensor frames "
+                "(cam0 vs body); check --est-frame and T_B_C0")
+    return None
+
+
+def evaluate_pair(gt: Trajectory, est: Trajectory, settings: EvalSettings, align_method: str, *, method: str,
+                  sequence: str, trial: str = "", T_B_C0: np.ndarray | None = None,
+                  gt_raw: tuple | None = None) -> PairResult:
+    """Evaluate one estimate (see module docstring); raises GeviError on unusable input."""
+    path = est.meta.get("path")
+    where = path or est.name
+    res = PairResult(method, sequence, trial, path, align=align_method)
+    res.warnings.extend(est.meta.get("warnings", []))
+    if len(est) == 0:
+        return failed(method, sequence, trial, path, "no valid poses")
+    est_f = to_gt_frame(est, settings.est_frame, gt.frame, T_B_C0, where)
+    assoc = associate(gt, est_f, settings.max_diff_s, settings.t_offset_s)
+    res.association = assoc
+    if assoc.n_matched < 3:
+        res.status, res.reason = "failed", f"only {assoc.n_matched} matched poses"
+        return res
+    aligned, alignment = align(assoc.gt, assoc.est, align_method, settings.n_align)
+    res.alignment = alignment
+    res.aligned = aligned
+    res.ate = compute_ate(assoc.gt, aligned)
+    try:
+        res.rpe = compute_rpe(assoc.gt, aligned, settings.rpe_delta, settings.rpe_unit)
+    except GeviError as exc:
+        res.warnings.append(f"{where}: RPE: {exc.message}")
+    if settings.kitti:
+        res.kitti = _kitti(gt, est_f, assoc, alignment, gt_raw, use_raw=est_f is est)
+    w = frame_mixup_warning(assoc, aligned, res.rpe)
+    if w:
+        res.warnings.append(f"{where}: {w}")
+    if assoc.coverage < settings.min_coverage:
+        res.status = "failed"
+        res.reason = (f"coverage {100 * assoc.coverage:.1f} % of the GT time span < "
+                      f"{100 * settings.min_coverage:g} % (--min-coverage)")
+    return res
+
+
+def _kitti(gt: Trajectory, est: Trajectory, assoc: Association, alignment: Alignment, gt_raw,
+           use_raw: bool) -> KittiResult:
+    """KITTI metric on GT frames (indexed data) or on the matched pairs (stamped data).
+
+    ``use_raw``: the estimate is unchanged from its file, so KITTI files may be re-read as written.
+    """
+    if assoc.by_index:
+        gf, gT = gt_raw if gt_raw is not None else raw_poses(gt)
+        if use_raw:
+            ef, eT = raw_poses(est)
+        else:
+            ef, eT = est.t_ns // 100_000_000, est.matrices
+        # the same frame shift the association applied (--t-offset on indexed data)
+        ef = ef + int(gf[assoc.gt_index[0]] - assoc.est.t_ns[0] // 100_000_000)
+        return kitti_errors(gf, gT, ef, eT, scale=alignment.scale)
+    n = assoc.n_matched
+    frames = np.arange(n)
+    return kitti_errors(frames, assoc.gt.matrices, frames, assoc.est.matrices, scale=alignment.scale)

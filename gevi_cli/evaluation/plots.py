@@ -1,0 +1,144 @@
+"""Figures of an evaluation, drawn on Agg canvases (``matplotlib.figure.Figure`` + ``FigureCanvasAgg``).
+
+gevi never imports ``matplotlib.pyplot`` here, so the user's matplotlib backend is never switched and
+no GUI opens; every figure is saved as PNG and PDF.
+
+Per sequence ``S`` (in ``<out>/plots/``):
+
+* ``traj_S``: top view and side view of the GT and every method's aligned estimate (of a method with
+  trials, the trial with the median ATE).  KITTI (camera frame, y down): top = x-z, side = x-y;
+  otherwise (z up): top = x-y, side = x-z.  Metres.
+* ``ate_S``: translation error (m) over time (s since the GT start; frame number for KITTI).
+* ``rpe_S``: box plots of the RPE translation (m) and rotation (deg) errors per method (all trials pooled).
+
+And ``summary_ate``: grouped bars of the ATE translation RMSE per sequence and method (error bars: std
+over trials).
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+
+def _figure(w=10.0, h=4.5, ncols=1, nrows=1):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(w, h), layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(nrows, ncols, squeeze=False)
+    return fig, axes.ravel()
+
+
+def _save(fig, base: Path) -> list[Path]:
+    out = []
+    for ext in ("png", "pdf"):
+        p = base.with_suffix(f".{ext}")
+        fig.savefig(p, dpi=110)
+        out.append(p)
+    return out
+
+
+def _safe(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._+-]+", "_", name)
+
+
+def _thin(x: np.ndarray, n: int = 4000) -> np.ndarray:
+    return x[:: max(1, len(x) // n)]
+
+
+def representative(results):
+    """Per method, the ok trial with the median ATE (None when all failed)."""
+    out = {}
+    for m in dict.fromkeys(r.method for r in results):
+        ok = [r for r in results if r.method == m and r.ok and r.ate is not None and r.aligned is not None]
+        if ok:
+            ok.sort(key=lambda r: r.ate.trans_rmse)
+            out[m] = ok[(len(ok) - 1) // 2]
+    return out
+
+
+def plot_sequence(out_dir: Path, sequence: str, gt, results) -> list[Path]:
+    """All per-sequence figures; ``results`` are the PairResults of this sequence."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    written = []
+    reps = representative(results)
+    top, side = ((0, 2), (0, 1)) if gt.indexed else ((0, 1), (0, 2))
+    axis_names = "xyz"
+    fig, (a1, a2) = _figure(12, 5.5, ncols=2)
+    g = _thin(gt.positions)
+    for ax, (i, j), title in ((a1, top, "top view"), (a2, side, "side view")):
+        ax.plot(g[:, i], g[:, j], "k--", lw=1.2, label="ground truth")
+        for m, r in reps.items():
+            p = _thin(r.aligned.positions)
+            ax.plot(p[:, i], p[:, j], lw=1.0, label=f"{m} ({r.align})")
+        ax.set_xlabel(f"{axis_names[i]} [m]")
+        ax.set_ylabel(f"{axis_names[j]} [m]")
+        ax.set_title(f"{sequence}: {title}")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.grid(True, alpha=0.3)
+    a1.legend(fontsize=8, loc="best")
+    written += _save(fig, out_dir / f"traj_{_safe(sequence)}")
+
+    fig, (ax,) = _figure(10, 4)
+    for m, r in reps.items():
+        t = r.association.gt.t_ns
+        x = (t // 100_000_000) if gt.indexed else (t - gt.t_ns[0]) * 1e-9
+        ax.plot(x, r.ate.trans_errors, lw=0.9, label=f"{m}: RMSE {r.ate.trans_rmse:.3g} m")
+    ax.set_xlabel("frame" if gt.indexed else "time since GT start [s]")
+    ax.set_ylabel("translation error [m]")
+    ax.set_title(f"{sequence}: absolute translation error after alignment")
+    ax.grid(True, alpha=0.3)
+    if reps:
+        ax.legend(fontsize=8)
+    written += _save(fig, out_dir / f"ate_{_safe(sequence)}")
+
+    methods = [m for m in dict.fromkeys(r.method for r in results)]
+    te, re_, labels = [], [], []
+    for m in methods:
+        rs = [r for r in results if r.method == m and r.ok and r.rpe is not None]
+        if rs:
+            te.append(np.concatenate([r.rpe.trans_errors for r in rs]))
+            re_.append(np.concatenate([r.rpe.rot_errors_deg for r in rs]))
+            labels.append(m)
+    fig, (b1, b2) = _figure(12, 4.5, ncols=2)
+    if labels:
+        b1.boxplot(te, tick_labels=labels, showfliers=False)
+        b2.boxplot(re_, tick_labels=labels, showfliers=False)
+        rpe = next(r.rpe for r in results if r.ok and r.rpe is not None)
+        d = f"delta {rpe.delta:g} {rpe.unit}"
+        b1.set_title(f"{sequence}: RPE translation ({d})")
+        b2.set_title(f"{sequence}: RPE rotation ({d})")
+    b1.set_ylabel("[m]")
+    b2.set_ylabel("[deg]")
+    for b in (b1, b2):
+        b.grid(True, axis="y", alpha=0.3)
+        b.tick_params(axis="x", labelrotation=20)
+    written += _save(fig, out_dir / f"rpe_{_safe(sequence)}")
+    return written
+
+
+def plot_summary(out_dir: Path, table) -> list[Path]:
+    """Grouped bar chart of one table (normally ATE translation RMSE)."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    seqs, methods = table.sequences, table.methods
+    fig, (ax,) = _figure(max(6.0, 1.2 * len(seqs) * max(1, len(methods)) * 0.5 + 3), 4.5)
+    width = 0.8 / max(1, len(methods))
+    x = np.arange(len(seqs))
+    for k, m in enumerate(methods):
+        mean = np.array([table.cell(s, m).stat("mean") for s in seqs])
+        std = np.array([table.cell(s, m).stat("std") for s in seqs])
+        bars = ax.bar(x + (k - (len(methods) - 1) / 2) * width, np.nan_to_num(mean), width,
+                      yerr=np.nan_to_num(std), capsize=3, label=m)
+        for b, v in zip(bars, mean):
+            if np.isnan(v):
+                ax.annotate("failed", (b.get_x() + b.get_width() / 2, 0), ha="center", va="bottom", fontsize=7,
+                            rotation=90)
+    ax.set_xticks(x, seqs)
+    ax.set_ylabel(table.title.split(" — ")[0])
+    ax.set_title(table.title, fontsize=9)
+    ax.grid(True, axis="y", alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save(fig, out_dir / "summary_ate")

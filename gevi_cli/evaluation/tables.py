@@ -1,0 +1,218 @@
+"""Tables of one metric: rows = sequences (+ an average row), columns = methods.
+
+A cell holds the values of every trial (run) of a method on a sequence:
+
+* one trial: the value; ``failed`` when it failed (missing, no valid poses, low coverage);
+* N trials: ``mean ± std`` (sample std, ddof=1) on the sequence row, and ``median (min, max)`` on an
+  extra row below it; failed trials are left out and counted (``[k/N failed]``); all failed -> ``failed``.
+
+In each row the best value (lowest; all gevi metrics are errors) is **bold** and the second best is
+marked: Markdown and console ``_x_``, LaTeX ``\\underline{x}`` (and ``\\textbf`` for the best).
+The average row is the mean over sequences of the per-sequence means; it is ``n/a`` for a method that
+failed on some sequence (an average over a subset would not compare).
+"""
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Cell:
+    """Values (one per successful trial) and the trial count of one (sequence, method)."""
+
+    values: list = field(default_factory=list)
+    n_trials: int = 0
+    reasons: list = field(default_factory=list)
+
+    @property
+    def n_ok(self) -> int:
+        return len(self.values)
+
+    @property
+    def failed(self) -> bool:
+        return self.n_ok == 0
+
+    def stat(self, name: str) -> float:
+        if not self.values:
+            return float("nan")
+        v = np.asarray(self.values, dtype=np.float64)
+        if name == "mean":
+            return float(v.mean())
+        if name == "std":
+            return float(v.std(ddof=1)) if len(v) > 1 else 0.0
+        if name == "median":
+            return float(np.median(v))
+        if name == "min":
+            return float(v.min())
+        if name == "max":
+            return float(v.max())
+        raise KeyError(name)
+
+
+@dataclass
+class Table:
+    """One metric over methods x sequences; ``title`` names metric, unit and alignment."""
+
+    key: str
+    title: str
+    methods: list
+    sequences: list
+    cells: dict = field(default_factory=dict)  # (sequence, method) -> Cell
+    note: str = ""
+
+    def cell(self, sequence: str, method: str) -> Cell:
+        return self.cells.get((sequence, method), Cell())
+
+    @property
+    def has_trials(self) -> bool:
+        return any(c.n_trials > 1 for c in self.cells.values())
+
+    def is_empty(self) -> bool:
+        return all(not c.values or all(math.isnan(x) for x in c.values) for c in self.cells.values())
+
+    def average(self, method: str) -> float:
+        means = [self.cell(s, method).stat("mean") for s in self.sequences]
+        if not means or any(math.isnan(m) for m in means):
+            return float("nan")
+        return float(np.mean(means))
+
+    def rows(self):
+        """Yield (label, kind, {method: (text parts)}, {method: ranking value}) for rendering.
+
+        kind is "mean" (plain or mean±std), "median" (median (min, max)) or "average".
+        """
+        trials = self.has_trials
+        for s in self.sequences:
+            yield s, "mean", {m: self.cell(s, m) for m in self.methods}
+            if trials:
+                yield f"{s} median (min, max)", "median", {m: self.cell(s, m) for m in self.methods}
+        if len(self.sequences) > 1 or not trials:
+            yield "average", "average", {m: self.average(m) for m in self.methods}
+
+
+def fmt(v: float) -> str:
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return "n/a"
+    a = abs(v)
+    if a >= 100:
+        return f"{v:.1f}"
+    if a >= 1:
+        return f"{v:.3f}"
+    return f"{v:.4f}"
+
+
+def _cell_text(kind: str, c) -> tuple[str, float]:
+    """(text without marks, value used for ranking)."""
+    if kind == "average":
+        return fmt(c), c
+    if c.failed:
+        return "failed", float("nan")
+    failed_note = f" [{c.n_trials - c.n_ok}/{c.n_trials} failed]" if c.n_ok < c.n_trials else ""
+    if kind == "median":
+        if c.n_trials <= 1:
+            return fmt(c.stat("median")), c.stat("median")
+        return f"{fmt(c.stat('median'))} ({fmt(c.stat('min'))}, {fmt(c.stat('max'))}){failed_note}", c.stat("median")
+    if c.n_trials > 1:
+        return f"{fmt(c.stat('mean'))} ± {fmt(c.stat('std'))}{failed_note}", c.stat("mean")
+    return fmt(c.stat("mean")), c.stat("mean")
+
+
+def _ranks(values: dict) -> dict:
+    """method -> 1 (best), 2 (second) or 0; lowest is best, NaN never ranked, ties share the rank."""
+    finite = sorted({v for v in values.values() if not math.isnan(v)})
+    out = {}
+    for m, v in values.items():
+        if math.isnan(v) or len(values) < 2:
+            out[m] = 0
+        elif v == finite[0]:
+            out[m] = 1
+        elif len(finite) > 1 and v == finite[1]:
+            out[m] = 2
+        else:
+            out[m] = 0
+    return out
+
+
+MARKS = {
+    "markdown": ("**{}**", "_{}_"),
+    "latex": ("\\textbf{{{}}}", "\\underline{{{}}}"),
+    "console": ("**{}**", "_{}_"),
+}
+
+
+def _grid(table: Table, style: str) -> list[list[str]]:
+    best, second = MARKS[style]
+    grid = [["sequence"] + list(table.methods)]
+    for label, kind, cells in table.rows():
+        texts, vals = {}, {}
+        for m, c in cells.items():
+            texts[m], vals[m] = _cell_text(kind, c)
+        ranks = _ranks(vals)
+        row = [label]
+        for m in table.methods:
+            t = texts[m]
+            if style == "latex":
+                t = t.replace("±", "$\\pm$").replace("_", "\\_")
+            if ranks[m] == 1:
+                t = best.format(t)
+            elif ranks[m] == 2:
+                t = second.format(t)
+            row.append(t)
+        grid.append(row)
+    return grid
+
+
+def render_markdown(table: Table, console: bool = False) -> str:
+    """GitHub Markdown table (bold best, ``_second_``); ``console`` uses ``*best*`` and ``second'``."""
+    grid = _grid(table, "console" if console else "markdown")
+    widths = [max(len(r[i]) for r in grid) for i in range(len(grid[0]))]
+    lines = [f"### {table.title}" if not console else table.title]
+    if table.note:
+        lines.append(table.note if console else f"_{table.note}_")
+    if not console:
+        lines.append("")
+    for k, r in enumerate(grid):
+        lines.append("| " + " | ".join(c.ljust(w) for c, w in zip(r, widths)) + " |")
+        if k == 0:
+            lines.append("|" + "|".join("-" * (w + 2) for w in widths) + "|")
+    return "\n".join(lines) + "\n"
+
+
+def render_latex(table: Table) -> str:
+    grid = _grid(table, "latex")
+    esc = lambda s: s.replace("_", "\\_").replace("%", "\\%")  # noqa: E731
+    cols = "l" + "r" * len(table.methods)
+    out = ["% " + table.title, "\\begin{tabular}{" + cols + "}", "\\toprule",
+           " & ".join(esc(c) for c in grid[0]) + " \\\\", "\\midrule"]
+    for r in grid[1:]:
+        if r[0] == "average":
+            out.append("\\midrule")
+        out.append(" & ".join([esc(r[0])] + r[1:]) + " \\\\")
+    out += ["\\bottomrule", "\\end{tabular}"]
+    caption = esc(table.title + (f" ({table.note})" if table.note else ""))
+    return "\\begin{table}[t]\n\\centering\n\\caption{" + caption + "}\n" + "\n".join(out) + "\n\\end{table}\n"
+
+
+def render_csv(table: Table) -> str:
+    """Plain numbers: one row per (sequence, statistic); columns = methods (empty = failed)."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["sequence", "statistic"] + list(table.methods))
+    stats = ["mean", "std", "median", "min", "max"] if table.has_trials else ["value"]
+
+    def num(v):
+        return "" if v is None or math.isnan(v) else repr(float(v))
+
+    for s in table.sequences:
+        for st in stats:
+            w.writerow([s, st] + [num(table.cell(s, m).stat("mean" if st == "value" else st)) for m in table.methods])
+        if table.has_trials:
+            w.writerow([s, "n_ok"] + [table.cell(s, m).n_ok for m in table.methods])
+            w.writerow([s, "n_trials"] + [table.cell(s, m).n_trials for m in table.methods])
+    w.writerow(["average", "mean"] + [num(table.average(m)) for m in table.methods])
+    return buf.getvalue()
