@@ -1,0 +1,97 @@
+"""Estimators of GeVI-SLAM and Bias-Eliminated PnP as pure numpy functions.
+
+See ``/work/shared/docs/estimators.md`` (the spec) and ``docs/estimators_notes.md`` (choices made
+where the spec left a gap, measured numbers). Conventions (spec section 1): normalized image
+coordinates (n, 2); ``(R_ck, t_ck)`` maps keyframe-left coordinates into current-left
+(``X_C = R_ck X_K + t_ck``, metres); stereo extrinsic ``X_R = R_rl X_L + t_rl``; the 4-DOF
+rotation model is ``R_ck = L_c^T Rz(psi) L_k``; angles in radians.
+"""
+
+from .errors import DegenerateInput, EstimatorError, NonFiniteInput, ShapeError, TooFewPoints
+from .lie import (
+    exp_so3,
+    levelling,
+    log_so3,
+    project,
+    rot4,
+    rot_x,
+    rot_y,
+    rot_z,
+    rotation_error,
+    rtilt,
+    skew,
+    tilt_angles,
+    wrap_angle,
+)
+from .noise import sigma2_onesided, sigma2_stereo, sigma2_symmetric
+from .triangulation import triangulate, triangulate_jacobian
+from .pnp6 import (
+    bias_matrix_G,
+    build_H,
+    depth_weights,
+    pnp6_be,
+    pnp6_l1,
+    pnp6_ls,
+    pnp6_refine,
+    pnp_l1_filter,
+    recover_pose,
+)
+from .pnp4 import bias_terms, build_A, epipolar_residuals_jac, pnp4_be, pnp4_gn, pnp4_ls, row_vectors
+from .minimal3pt import (
+    essential_upright,
+    ransac_3pt_upright,
+    ransac_iterations,
+    sampson_distances,
+    solve_3pt_upright,
+)
+from .crlb import crlb4, crlb6, fisher6
+
+__all__ = [
+    "EstimatorError",
+    "DegenerateInput",
+    "TooFewPoints",
+    "NonFiniteInput",
+    "ShapeError",
+    "skew",
+    "exp_so3",
+    "log_so3",
+    "rot_x",
+    "rot_y",
+    "rot_z",
+    "rtilt",
+    "tilt_angles",
+    "levelling",
+    "rot4",
+    "project",
+    "wrap_angle",
+    "rotation_error",
+    "sigma2_onesided",
+    "sigma2_symmetric",
+    "sigma2_stereo",
+    "triangulate",
+    "triangulate_jacobian",
+    "build_H",
+    "bias_matrix_G",
+    "recover_pose",
+    "pnp6_ls",
+    "pnp6_be",
+    "pnp6_refine",
+    "pnp6_l1",
+    "pnp_l1_filter",
+    "depth_weights",
+    "row_vectors",
+    "build_A",
+    "bias_terms",
+    "pnp4_ls",
+    "pnp4_be",
+    "epipolar_residuals_jac",
+    "pnp4_gn",
+    "solve_3pt_upright",
+    "ransac_3pt_upright",
+    "ransac_iterations",
+    "essential_upright",
+    "sampson_distances",
+    "crlb4",
+    "crlb6",
+    "fisher6",
+]

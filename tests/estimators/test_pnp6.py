@@ -1,0 +1,132 @@
+import numpy as np
+import pytest
+
+from gevi_cli.estimators import (
+    DegenerateInput,
+    NonFiniteInput,
+    TooFewPoints,
+    bias_matrix_G,
+    build_H,
+    pnp6_be,
+    pnp6_l1,
+    pnp6_ls,
+    pnp6_refine,
+    pnp_l1_filter,
+    depth_weights,
+    sigma2_onesided,
+    triangulate,
+)
+from gevi_cli.estimators import montecarlo as mc
+from gevi_cli.estimators import simulation as sim
+from gevi_cli.estimators.lie import exp_so3, project, rotation_error
+
+
+@pytest.fixture
+def s6(rng):
+    return sim.scene6(rng, 200)
+
+
+def test_noise_free_ls_be(s6):
+    s = s6
+    # pipeline-style: sigma^2 estimated from noise-free data is 0, BE reduces to LS
+    s2 = sigma2_onesided(s.q_o, s.z_o)
+    p, cov = triangulate(s.z_o, s.y_o, s.R_rl, s.t_rl, s2)
+    for R, t in (pnp6_ls(p, s.q_o), pnp6_be(p, cov, s.q_o), pnp6_be(p, cov, s.q_o, depth_weights(p))):
+        assert np.max(np.abs(R - s.R)) < 1e-9 and np.max(np.abs(t - s.t)) < 1e-9
+
+
+def test_noise_free_l1(s6):
+    s = s6
+    R, t = pnp6_l1(s.P, s.q_o)
+    assert np.max(np.abs(R - s.R)) < 1e-9 and np.max(np.abs(t - s.t)) < 1e-9
+
+
+def test_G_matches_monte_carlo(rng):
+    # E[H^T H]/n - H_o^T H_o/n = G for H built with noisy p (centroid noise ignored: use many draws)
+    s = sim.scene6(rng, 30)
+    _, cov = triangulate(s.z_o, s.y_o, s.R_rl, s.t_rl, s.sigma**2)
+    w = depth_weights(s.P)
+    Ho, _, pbar = build_H(s.P, s.q_o, w)
+    acc = np.zeros((11, 11))
+    draws = 4000
+    L = np.linalg.cholesky(cov)
+    for _ in range(draws):
+        p = s.P + np.einsum("nij,nj->ni", L, rng.standard_normal(s.P.shape))
+        H, _, _ = build_H(p, s.q_o, w)
+        # use the true centroid, as in the derivation
+        H = H.copy()
+        pc = p - pbar
+        H[0::2, 0:3] = -(s.q_o[:, :1] * pc) * w[:, None]
+        H[1::2, 0:3] = -(s.q_o[:, 1:] * pc) * w[:, None]
+        acc += H.T @ H
+    emp = acc / draws / 30 - Ho.T @ Ho / 30
+    G = bias_matrix_G(cov, s.q_o, w)
+    assert np.max(np.abs(emp - G)) < 0.1 * np.max(np.abs(G))
+
+
+def test_refine_converges_from_perturbed_start(s6):
+    s = s6
+    p, cov = triangulate(s.z_o, s.y_o, s.R_rl, s.t_rl, s.sigma**2)
+    R0 = s.R @ exp_so3([0.01, -0.02, 0.005])
+    t0 = s.t + np.array([0.02, -0.01, 0.03])
+    e0 = rotation_error(R0, s.R)
+    R1, t1 = pnp6_refine(R0, t0, p, cov, s.q_o)
+    R2, t2 = pnp6_refine(R1, t1, p, cov, s.q_o)
+    R3, t3 = pnp6_refine(*pnp6_refine(R2, t2, p, cov, s.q_o), p, cov, s.q_o)  # LM damping 1e-6 slows the tail
+    # quadratic convergence of Gauss-Newton on a zero-residual problem
+    e1, e2 = rotation_error(R1, s.R), rotation_error(R2, s.R)
+    assert e1 < 0.05 * e0 and e2 < 0.05 * e1
+    assert rotation_error(R3, s.R) < 1e-9 and np.linalg.norm(t3 - s.t) < 1e-9
+
+
+def test_be_removes_bias_gaussian3d():
+    # spec 15: Gaussian-3D model, n = 1600: |t-bias| < 0.2 LS bias and < 0.2 cm.
+    # 200 runs: per-axis SE ~ 1.0 cm / sqrt(200) = 0.07 cm, so an unbiased estimator's |mean|
+    # is ~0.12 cm (chi_3), comfortably below 0.2 cm.
+    r = mc.run6(1600, 200, seed=11, gaussian3d=True)
+    assert r.bias_t("be") < 0.2 * r.bias_t("ls")
+    assert r.bias_t("be") < 0.002
+
+
+def test_refine_efficiency_real_triangulation():
+    # spec 5.6 / 15: rotation within 35 % of the root-mean CRLB6 at n = 1600 (observed ~1.2),
+    # translation below the 0.7 cm floor. The per-run errors are heavy-tailed relative to the
+    # per-run bound (100-run ratios ranged 1.20-1.41 over seeds 0, 5, 6, 7; 400 runs gave
+    # 1.22 and 1.24), so 300 runs are used to keep the SE of the ratio ~0.04.
+    r = mc.run6(1600, 300, seed=1)
+    assert r.rmse_rot("ref") < 1.35 * r.bound_rot()
+    assert r.rmse_t("ref") < 0.007
+    assert r.rmse_rot("ref") < r.rmse_rot("be")  # the step improves on BE
+
+
+def test_l1_filter_removes_gross_outliers(rng):
+    s = sim.scene6(rng, 200)
+    p, _ = triangulate(s.z, s.y, s.R_rl, s.t_rl, s.sigma**2)
+    q = s.q.copy()
+    bad = rng.choice(200, 14, replace=False)  # 7 % gross outliers
+    q[bad] += rng.choice([-1, 1], (14, 2)) * rng.uniform(0.05, 0.2, (14, 2))
+    keep = pnp_l1_filter(p, q)
+    assert keep.sum() == 180
+    assert np.sum(~keep[bad]) >= 12
+
+
+def test_degenerate_inputs(s6):
+    s = s6
+    p, cov = triangulate(s.z_o, s.y_o, s.R_rl, s.t_rl, s.sigma**2)
+    with pytest.raises(TooFewPoints):
+        pnp6_be(p[:5], cov[:5], s.q_o[:5])
+    q = s.q_o.copy()
+    q[0, 0] = np.inf
+    with pytest.raises(NonFiniteInput):
+        pnp6_ls(p, q)
+    # points behind the camera: kappa <= 0
+    # (projections are sign-blind, so build a pose that puts every point at negative depth:
+    # the linear solution then has det < 0, i.e. kappa <= 0)
+    Xc = s.P @ s.R.T + s.t - np.array([0.0, 0.0, 30.0])
+    assert np.all(Xc[:, 2] < 0)
+    with pytest.raises(DegenerateInput, match="kappa"):
+        pnp6_ls(s.P, project(Xc))
+    # coplanar-collinear: all points on one line -> singular system
+    line = np.outer(np.linspace(1, 5, 20), [0.1, 0.2, 1.0])
+    with pytest.raises(DegenerateInput):
+        pnp6_ls(line, project(line @ s.R.T + s.t))
