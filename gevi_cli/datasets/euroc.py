@@ -150,18 +150,6 @@ class EurocSequence(Sequence):
         self._gt_override = Path(groundtruth) if groundtruth is not None else None
 
     # --------------------------------------------------------------------------------- metadata
-    @property
-    def name(self) -> str:
-        return self._name
-
-    @property
-    def calibration(self) -> StereoRig:
-        return self._rig
-
-    @property
-    def stamps_ns(self) -> np.ndarray:
-        return self._stamps
-
     @cached_property
     def imu(self) -> ImuData | None:
         folder = self.mav0 / "imu0"

@@ -65,6 +65,7 @@ class KittiSequence(Sequence):
     def __init__(self, path: Path, groundtruth: str | Path | None = None, cameras: str | None = None):
         super().__init__()
         self.path = Path(path)
+        self._name = self.path.resolve().name
         if cameras is None:
             cameras = "gray" if (self.path / "image_0").is_dir() else "color"
         if cameras not in _CAMERAS:
@@ -98,18 +99,6 @@ class KittiSequence(Sequence):
         self._rig = StereoRig(_camera_from_P(calib[P_left], calib["P0"], w, h),
                               _camera_from_P(calib[P_right], calib["P0"], w, h))
         self._gt_override = Path(groundtruth) if groundtruth is not None else None
-
-    @property
-    def name(self) -> str:
-        return self.path.resolve().name
-
-    @property
-    def calibration(self) -> StereoRig:
-        return self._rig
-
-    @property
-    def stamps_ns(self) -> np.ndarray:
-        return self._stamps
 
     def _gt_path(self) -> Path | None:
         if self._gt_override is not None:

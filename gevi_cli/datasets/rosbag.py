@@ -548,18 +548,6 @@ class RosbagSequence(Sequence):
 
     # --------------------------------------------------------------------------------- metadata
     @property
-    def name(self) -> str:
-        return self._name
-
-    @property
-    def calibration(self) -> StereoRig:
-        return self._rig
-
-    @property
-    def stamps_ns(self) -> np.ndarray:
-        return self._stamps
-
-    @property
     def imu(self) -> ImuData | None:
         return self._imu
 

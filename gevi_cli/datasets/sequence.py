@@ -70,7 +70,9 @@ def rate_hz(t_ns: np.ndarray) -> float:
 class Sequence(abc.ABC):
     """A recorded stereo(-inertial) sequence, opened by one of the registered readers.
 
-    Implementations read metadata eagerly (stamps, calibration, IMU, ground truth) and images lazily.
+    Implementations read metadata eagerly (stamps, calibration, IMU, ground truth) and images lazily:
+    they set ``_name``, ``_rig`` (the :class:`StereoRig`) and ``_stamps`` in ``__init__`` and
+    implement ``_read_pair``.
     """
 
     kind: str = ""
@@ -78,18 +80,23 @@ class Sequence(abc.ABC):
     def __init__(self):
         self.warnings: list[str] = []
 
-    @property
-    @abc.abstractmethod
-    def name(self) -> str: ...
+    # Readers set these three in __init__; the properties are the public, read-only view.
+    _name: str
+    _rig: StereoRig
+    _stamps: np.ndarray
 
     @property
-    @abc.abstractmethod
-    def calibration(self) -> StereoRig: ...
+    def name(self) -> str:
+        return self._name
 
     @property
-    @abc.abstractmethod
+    def calibration(self) -> StereoRig:
+        return self._rig
+
+    @property
     def stamps_ns(self) -> np.ndarray:
         """(n,) int64 stamps of the stereo pairs, increasing."""
+        return self._stamps
 
     @abc.abstractmethod
     def _read_pair(self, index: int) -> StereoFrame:
