@@ -7,7 +7,7 @@ of body poses ``T_W_B`` unless its ``frame`` says otherwise (KITTI: cam0 = body)
 from __future__ import annotations
 
 import abc
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Iterator
 
 import numpy as np

@@ -9,8 +9,7 @@ import pytest
 
 from support import run_cli
 from gevi_cli.datasets import open_sequence
-from gevi_cli.datasets.calibration import invert_pose
-from gevi_cli.errors import DataError, GeviError, LayoutError
+from gevi_cli.errors import DataError, GeviError
 from gevi_cli.trajectory import Trajectory, write_trajectory
 
 

@@ -7,7 +7,6 @@ import pytest
 
 from support import run_cli, shared_path
 from gevi_cli.datasets import open_sequence
-from gevi_cli.errors import DataError
 from gevi_cli.trajectory import read_trajectory
 
 # KITTI 04-10 rectified calibration as the CurrentFeature authors' runner uses it (cfo_kitti04/SOURCE.md)

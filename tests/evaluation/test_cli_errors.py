@@ -2,9 +2,7 @@
 import json
 
 import numpy as np
-import pytest
 
-from gevi_cli.evaluation.evaluate import EvalSettings, evaluate_pair, frame_mixup_warning
 from gevi_cli.trajectory import Trajectory
 
 from eval_support import run_cli, synthetic, write_tum

@@ -1,7 +1,6 @@
 """Trajectory formats: reading every real file by auto-detection, exact round trips, validation."""
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest
