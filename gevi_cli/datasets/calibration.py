@@ -12,15 +12,9 @@ from functools import cached_property
 import cv2
 import numpy as np
 
+from gevi_cli.geometry import invert_pose
+
 DISTORTION_MODELS = ("radtan", "equidistant", "none")
-
-
-def invert_pose(T: np.ndarray) -> np.ndarray:
-    """Inverse of a 4x4 rigid transform."""
-    Ti = np.eye(4)
-    Ti[:3, :3] = T[:3, :3].T
-    Ti[:3, 3] = -T[:3, :3].T @ T[:3, 3]
-    return Ti
 
 
 @dataclass(frozen=True)

@@ -38,9 +38,10 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from gevi_cli.datasets.calibration import PinholeCamera, StereoRig, invert_pose
+from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
 from gevi_cli.datasets.yamlio import load_yaml, matrix, require
 from gevi_cli.errors import DataError
+from gevi_cli.geometry import invert_pose
 
 _DISTORTION = {"radtan": "radtan", "radial-tangential": "radtan", "plumb_bob": "radtan",
                "equidistant": "equidistant", "fisheye": "equidistant", "none": "none"}

@@ -13,11 +13,11 @@ from pathlib import Path
 
 import numpy as np
 
-from gevi_cli.datasets.calibration import invert_pose
 from gevi_cli.datasets.euroc import EurocSequence, find_mav0
 from gevi_cli.datasets.registry import register
 from gevi_cli.datasets.yamlio import load_yaml, matrix
 from gevi_cli.errors import LayoutError
+from gevi_cli.geometry import invert_pose
 from gevi_cli.trajectory import Trajectory, read_trajectory
 
 

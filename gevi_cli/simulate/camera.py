@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from gevi_cli.simulate.geometry import inv_T
+from gevi_cli.geometry import invert_pose
 
 
 @dataclass(frozen=True)
@@ -126,7 +126,7 @@ class CameraModel:
 
 
 @dataclass(frozen=True)
-class StereoRig:
+class RenderRig:
     """Two cameras rigidly mounted on the body (= IMU) frame B.
 
     Attributes:
@@ -142,7 +142,7 @@ class StereoRig:
     @property
     def T_C1_C0(self) -> np.ndarray:
         """Left -> right camera transform (``X_C1 = T_C1_C0 X_C0``)."""
-        return inv_T(self.T_B_C1) @ self.T_B_C0
+        return invert_pose(self.T_B_C1) @ self.T_B_C0
 
     @property
     def baseline_m(self) -> float:

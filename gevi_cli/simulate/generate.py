@@ -16,11 +16,17 @@ from typing import Iterator
 
 import numpy as np
 
-from gevi_cli.simulate.camera import CameraModel, StereoRig
-from gevi_cli.simulate.geometry import inv_T, make_T
+from gevi_cli.geometry import invert_pose, make_T
+from gevi_cli.simulate.camera import CameraModel, RenderRig
 from gevi_cli.simulate.imu import ImuParams, ImuSeries, synthesize_imu
 from gevi_cli.simulate.motion import MotionSample
-from gevi_cli.simulate.presets import PRESETS, PresetSpec, build_motion, build_rig, mocap_marker_extrinsic
+from gevi_cli.simulate.presets import (
+    PRESETS,
+    PresetSpec,
+    build_motion,
+    build_rig,
+    mocap_marker_extrinsic,
+)
 from gevi_cli.simulate.render import CameraRenderer, SensorModel
 from gevi_cli.simulate.scenes import build_scene
 
@@ -77,7 +83,7 @@ class SimulatedSequence:
     """Everything the writers need.  Frames are rendered lazily by :meth:`frames`."""
 
     config: SimulationConfig
-    rig: StereoRig
+    rig: RenderRig
     motion: object = field(repr=False)
     scene_builder: object = field(repr=False)
     t0_ns: int = T0_NS
@@ -278,7 +284,7 @@ def build_sequence(config: SimulationConfig) -> SimulatedSequence:
 
 def relative_pose(T_a: np.ndarray, T_b: np.ndarray) -> np.ndarray:
     """``T_a^-1 T_b`` for stacks of 4x4 poses."""
-    return inv_T(T_a) @ T_b
+    return invert_pose(T_a) @ T_b
 
 
 __all__ = ["SimulationConfig", "SimulatedSequence", "build_sequence", "T0_NS", "make_T"]

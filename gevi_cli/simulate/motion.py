@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from gevi_cli.simulate.geometry import euler_zyx_rates_to_body_rate, euler_zyx_to_matrix
+from gevi_cli.geometry import euler_zyx_rates_to_body_rate, euler_zyx_to_matrix
 
 
 @dataclass(frozen=True)

@@ -10,10 +10,17 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from gevi_cli.simulate.camera import CameraModel, StereoRig
-from gevi_cli.simulate.geometry import make_T, small_rotation
+from gevi_cli.geometry import make_T, small_rotation
+from gevi_cli.simulate.camera import CameraModel, RenderRig
 from gevi_cli.simulate.imu import ImuParams
-from gevi_cli.simulate.motion import CarMotion, HoverMotion, Sines, Smoothstep, TimeWarp, max_acceleration
+from gevi_cli.simulate.motion import (
+    CarMotion,
+    HoverMotion,
+    Sines,
+    Smoothstep,
+    TimeWarp,
+    max_acceleration,
+)
 from gevi_cli.simulate.render import SensorModel
 from gevi_cli.simulate.scene import Water
 
@@ -146,13 +153,13 @@ PRESETS: dict[str, PresetSpec] = {
 
 
 # ------------------------------------------------------------------------------------- rigs
-def build_rig(spec: PresetSpec, camera: CameraModel, baseline_m: float) -> StereoRig:
+def build_rig(spec: PresetSpec, camera: CameraModel, baseline_m: float) -> RenderRig:
     """Left/right cameras on the body: cam0 at ``spec.lever_arm_m``, cam1 at +baseline along x_c0."""
     base = R_BC_DOWN if spec.facing == "down" else R_BC_FORWARD
     R_BC0 = small_rotation(*spec.mount_deg) @ base
     T_B_C0 = make_T(R_BC0, spec.lever_arm_m)
     T_C0_C1 = make_T(np.eye(3), [baseline_m, 0.0, 0.0])
-    return StereoRig(camera, camera, T_B_C0, T_B_C0 @ T_C0_C1)
+    return RenderRig(camera, camera, T_B_C0, T_B_C0 @ T_C0_C1)
 
 
 def mocap_marker_extrinsic() -> np.ndarray:

@@ -218,7 +218,6 @@ class CameraRenderer:
             value += np.float32(water.veil) * (np.float32(1.0) - att)
         if power:
             value *= self._cos_axis_power(power)
-        H, W = self.camera.height, self.camera.width
         img = self._downsample(value)
         if water is not None and water.blur_max > 0:
             rng_m = self._downsample(t_clip)

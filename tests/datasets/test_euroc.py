@@ -6,8 +6,8 @@ import shutil
 import cv2
 import numpy as np
 import pytest
-
 from support import run_cli
+
 from gevi_cli.datasets import open_sequence
 from gevi_cli.errors import DataError, GeviError
 from gevi_cli.trajectory import Trajectory, write_trajectory

@@ -4,8 +4,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-
 from support import run_cli, shared_path
+
 from gevi_cli.datasets import open_sequence
 from gevi_cli.trajectory import read_trajectory
 

@@ -6,11 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from support import run_cli
 
 from gevi_cli.datasets import open_sequence
+from gevi_cli.geometry import invert_pose
 from gevi_cli.simulate.generate import SimulationConfig, build_sequence, simulate
-from gevi_cli.simulate.geometry import inv_T
-from support import run_cli
 
 TINY = {
     # preset: (duration s, rate Hz, resolution, expected reader kind)
@@ -62,7 +62,7 @@ def test_readers_open_every_preset(preset, euroc_outputs):
         # mocap: marker poses map back to the body poses within the mocap noise
         T_B_M = seq.T_B_M
         np.testing.assert_allclose(T_B_M, sim.T_B_M, atol=1e-12)
-        mocap_body = seq.mocap.with_sensor_frame(inv_T(T_B_M), frame="body")
+        mocap_body = seq.mocap.with_sensor_frame(invert_pose(T_B_M), frame="body")
         idx = np.searchsorted(gt.t_ns, mocap_body.t_ns)
         assert np.abs(mocap_body.positions - gt.positions[idx]).max() < 0.005
 
@@ -98,7 +98,7 @@ def test_kitti_layout(tmp_path, capsys):
     sim = build_sequence(SimulationConfig("kitti-like", seed=1, duration_s=2.0, rate_hz=10.0, resolution=(310, 94),
                                           distortion=False))
     T = sim.camera_poses(sim.frame_t_ns, 0)
-    rel = inv_T(T[0]) @ T
+    rel = invert_pose(T[0]) @ T
     np.testing.assert_allclose(seq.groundtruth.positions, rel[:, :3, 3], atol=1e-6)
     speed = np.linalg.norm(np.diff(rel[:, :3, 3], axis=0), axis=1) * 10.0
     assert 7.0 < speed.mean() < 13.0  # car at ~10 m/s

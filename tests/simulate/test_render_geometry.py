@@ -5,9 +5,9 @@ import cv2
 import numpy as np
 import pytest
 
+from gevi_cli.geometry import make_T, small_rotation
 from gevi_cli.simulate import textures as tx
 from gevi_cli.simulate.camera import CameraModel
-from gevi_cli.simulate.geometry import make_T, small_rotation
 from gevi_cli.simulate.render import CameraRenderer, SensorModel
 from gevi_cli.simulate.scene import Scene, Texture, rect_plane
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gevi_cli.simulate.geometry import inv_T, matrix_to_quat_wxyz, snap
+from gevi_cli.geometry import invert_pose, matrix_to_quat_wxyz, snap
 from gevi_cli.simulate.writers import plain, write_simulation_yaml
 
 TOPIC_CAM = ("/cam0/image_raw", "/cam1/image_raw")
@@ -30,8 +30,8 @@ TOPIC_MOCAP = "/mocap0/pose"
 
 def camchain(seq) -> dict:
     rig = seq.rig
-    T_C0_I = inv_T(rig.T_B_C0)
-    T_C1_I = inv_T(rig.T_B_C1)
+    T_C0_I = invert_pose(rig.T_B_C0)
+    T_C1_I = invert_pose(rig.T_B_C1)
     out = {}
     for i, (cam, T) in enumerate(((rig.cam0, T_C0_I), (rig.cam1, T_C1_I))):
         d = {

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gevi_cli.simulate.geometry import matrix_to_quat_wxyz
+from gevi_cli.geometry import matrix_to_quat_wxyz
 from gevi_cli.simulate.writers import fmt, write_png, write_simulation_yaml
 
 IMU_HEADER = ("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"

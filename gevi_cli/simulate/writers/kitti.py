@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gevi_cli.simulate.geometry import inv_T, snap
+from gevi_cli.geometry import invert_pose, snap
 from gevi_cli.simulate.writers import write_png, write_simulation_yaml
 
 
@@ -36,7 +36,7 @@ def calib_text(rig) -> str:
         raise ValueError("KITTI output needs a rectified rig (cam1 = cam0 shifted along x)")
     P0 = K @ np.hstack([np.eye(3), np.zeros((3, 1))])
     P1 = snap(K @ np.hstack([np.eye(3), T_C1_C0[:3, 3:4]]))
-    Tr = inv_T(rig.T_B_C0)[:3, :]
+    Tr = invert_pose(rig.T_B_C0)[:3, :]
     lines = [f"P0: {_row(P0)}", f"P1: {_row(P1)}", f"P2: {_row(P0)}", f"P3: {_row(P1)}", f"Tr: {_row(Tr)}"]
     return "\n".join(lines) + "\n"
 
@@ -53,7 +53,7 @@ def write_kitti(seq, out: Path, progress: bool = True, workers: int | None = Non
     t = seq.frame_t_ns
     (sdir / "times.txt").write_text("".join("%.6e\n" % ((x - t[0]) * 1e-9) for x in t.tolist()))
     T = seq.camera_poses(t, 0)
-    rel = snap(inv_T(T[0]) @ T, 1e-15)
+    rel = snap(invert_pose(T[0]) @ T, 1e-15)
     (out / "poses" / "00.txt").write_text("".join(_row(P[:3, :], "%.9e") + "\n" for P in rel))
     for k, _, left, right in seq.frames(progress=progress, workers=workers):
         write_png(sdir / "image_0" / f"{k:06d}.png", left)

@@ -1,28 +1,14 @@
-"""Small rigid-body helpers (numpy, float64).
+"""Rigid-body helpers shared by datasets, trajectories and the simulator (numpy, float64).
 
 Conventions (docs/estimators.md section 1): ``T_BA`` is a 4x4 homogeneous matrix mapping coordinates
-in frame A into frame B, ``X_B = R_BA X_A + t_BA``.  Rotations are active; ``rot_x/rot_y/rot_z`` are
-the standard elementary rotations.  Quaternions are stored w first (Hamilton convention).
+in frame A into frame B, ``X_B = R_BA X_A + t_BA``.  Rotations are active.  Quaternions are stored
+w first (Hamilton convention).  The estimators keep their own Lie-group helpers in
+``gevi_cli.estimators.lie`` (pure math with Jacobians).
 """
 from __future__ import annotations
 
 import numpy as np
 from scipy.spatial.transform import Rotation
-
-
-def rot_x(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-
-
-def rot_y(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
-def rot_z(a: float) -> np.ndarray:
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
 def euler_zyx_to_matrix(yaw, pitch, roll) -> np.ndarray:
@@ -66,7 +52,7 @@ def make_T(R: np.ndarray, t) -> np.ndarray:
     return T
 
 
-def inv_T(T: np.ndarray) -> np.ndarray:
+def invert_pose(T: np.ndarray) -> np.ndarray:
     """Inverse of (..., 4, 4) rigid transforms."""
     T = np.asarray(T, float)
     R = T[..., :3, :3]
