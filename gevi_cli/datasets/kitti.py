@@ -53,18 +53,29 @@ def _camera_from_P(P: np.ndarray, P_ref: np.ndarray, width: int, height: int) ->
     return PinholeCamera(width, height, K[0, 0], K[1, 1], K[0, 2], K[1, 2], "none", (), T_B_C)
 
 
+def _single_sequence(path: Path) -> Path:
+    """A KITTI root (``dataset/`` with ``sequences/XX``) holding one sequence stands for that sequence."""
+    sequences = path / "sequences"
+    if sequences.is_dir():
+        children = [c for c in sequences.iterdir() if c.is_dir()]
+        if len(children) == 1:
+            return children[0]
+    return path
+
+
 @register("kitti")
 class KittiSequence(Sequence):
     """One KITTI odometry sequence folder (``.../sequences/XX``)."""
 
     @staticmethod
     def detect(path: Path) -> bool:
+        path = _single_sequence(path)
         return path.is_dir() and (path / "calib.txt").is_file() and (path / "times.txt").is_file() and (
             (path / "image_0").is_dir() or (path / "image_2").is_dir())
 
     def __init__(self, path: Path, groundtruth: str | Path | None = None, cameras: str | None = None):
         super().__init__()
-        self.path = Path(path)
+        self.path = _single_sequence(Path(path))
         self._name = self.path.resolve().name
         if cameras is None:
             cameras = "gray" if (self.path / "image_0").is_dir() else "color"

@@ -75,3 +75,9 @@ def test_kitti_errors(tmp_path, capsys):
     (seq_dir / "calib.txt").unlink()
     code, _, err = run_cli(["info", seq_dir], capsys)
     assert code == 2 and "not a recognised dataset" in err
+
+
+def test_kitti_root_with_one_sequence(tmp_path):
+    _kitti_tree(tmp_path, n=3, with_gt=False)
+    seq = open_sequence(tmp_path / "dataset")
+    assert seq.kind == "kitti" and seq.name == "04" and len(seq) == 3
