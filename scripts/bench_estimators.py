@@ -16,6 +16,7 @@ import pandas as pd
 
 from gevi_cli import estimators as est
 from gevi_cli.estimators import simulation as sim
+from gevi_cli.estimators.pnp4 import pnp4_be_cov
 
 
 def main():
@@ -32,6 +33,11 @@ def main():
         be4 = est.pnp4_be(p, cov, s.q, s.L_k, s.L_c)
         R6, t6 = est.pnp6_be(p, cov, s.q)
         qo, _ = sim.add_outliers(rng, s.q, 0.3)
+
+        def be4c(p=p, cov=cov, s=s):
+            psi, t, be4c.C = pnp4_be_cov(p, cov, s.q, s.L_k, s.L_c)
+            return psi, t
+
         cases = {
             "sigma2_onesided": lambda: est.sigma2_onesided(s.q, s.z),
             "sigma2_stereo": lambda: est.sigma2_stereo(s.z, s.y, s.R_rl, s.t_rl),
@@ -46,6 +52,8 @@ def main():
             "pnp4_gn": lambda: est.pnp4_gn(*be4, s.z, s.y, s.q, s.L_k, s.L_c, s.R_rl, s.t_rl),
             "pnp4_be + gn": lambda: est.pnp4_gn(*est.pnp4_be(p, cov, s.q, s.L_k, s.L_c), s.z, s.y, s.q, s.L_k,
                                                 s.L_c, s.R_rl, s.t_rl),
+            "pnp4_be_cov + gn(be_cov)": lambda: est.pnp4_gn(*be4c(), s.z, s.y, s.q, s.L_k, s.L_c, s.R_rl, s.t_rl,
+                                                           be_cov=be4c.C, sigma2=s.sigma**2),
             "solve_3pt_upright": lambda: est.solve_3pt_upright(s.z[:3], s.q[:3], s.L_k, s.L_c),
             "ransac_3pt (30% outl.)": lambda: est.ransac_3pt_upright(s.z, qo, s.L_k, s.L_c, 3 * s.sigma, seed=1),
             "crlb4": lambda: est.crlb4(s.psi, s.t, s.z_o, s.y_o, s.q_o, s.L_k, s.L_c, s.R_rl, s.t_rl, s.sigma**2),

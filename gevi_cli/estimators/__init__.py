@@ -95,3 +95,44 @@ __all__ = [
     "crlb6",
     "fisher6",
 ]
+
+# spec 9 (preintegration, stereo-IMU initialisation) and spec 10 (epipolar local BA)
+from .preintegration import Preintegrated, imu_segment, preintegrate, preintegrate_batch
+from .initialization import (
+    InitOptions,
+    InitResult,
+    camera_to_imu_poses,
+    gravity_to_R_WV,
+    init_gravity_velocity_accbias,
+    init_gyro_bias,
+    refine_gravity,
+    stereo_imu_init,
+)
+from .epipolar_ba import BAOptions, BAProblem, BAResult, BAWindow, ImageObs, epipolar_local_ba, poses_from_tracking
+
+__all__ += [
+    "Preintegrated",
+    "preintegrate",
+    "preintegrate_batch",
+    "imu_segment",
+    "InitOptions",
+    "InitResult",
+    "camera_to_imu_poses",
+    "init_gyro_bias",
+    "init_gravity_velocity_accbias",
+    "refine_gravity",
+    "gravity_to_R_WV",
+    "stereo_imu_init",
+    "ImageObs",
+    "BAWindow",
+    "BAOptions",
+    "BAResult",
+    "BAProblem",
+    "epipolar_local_ba",
+    "poses_from_tracking",
+]
+
+# spec 8 (BCD refinement with joint gravity-prior covariance estimation)
+from .fusion import FusionState, FusionWindow, bcd_refine, propagate_tilts, sigma_step
+
+__all__ += ["FusionWindow", "FusionState", "bcd_refine", "propagate_tilts", "sigma_step"]

@@ -1,15 +1,46 @@
-"""Gravity-prior covariance estimation for the 6-DOF BCD refinement (spec section 8).
+"""6-DOF refinement with joint gravity-prior covariance estimation (spec section 8).
 
-Only the closed-form Sigma-step is implemented so far; ``bcd_refine`` (the chi-step over
-yaw, translation and the per-sample tilts) is not yet written (see docs/estimators_notes.md).
+State (spec 8.1): chi = [psi, t_CK (3), phi_1, theta_1, ..., phi_K, theta_K] -- relative yaw and
+translation of the current camera w.r.t. the keyframe, and the *absolute* IMU roll/pitch at the K
+IMU samples of the window (k = 1: keyframe, k = K: current frame). The relative rotation is
+
+    R_CK = R_IC^T R_tilt(phi_K, theta_K)^T Rz(psi) R_tilt(phi_1, theta_1) R_IC.
+
+Residuals (all whitened, stacked into one vector):
+
+1. visual   r_i = q_i - pi(R_CK p_i + t_CK), Sigma_vis_i = J_h Sigma_i J_h^T + sigma^2 I
+   (J_h = d pi / d p, fixed at the initial estimate) [PROPOSAL 8.1.1];
+2. gravity  r_k = a_k - R_tilt_k^T e3 with the unknown shared covariance Sigma_imu;
+3. gyro chain r_k = (phi, theta)_{k+1} - tilt(R_tilt_k dR_k), covariance ``gyro_var`` I_2 [PROPOSAL];
+4. keyframe tilt prior r = (phi, theta)_1 - prior_mean, covariance prior_cov [PROPOSAL].
+
+Joint objective (spec 8.2): J = sum of squared whitened residuals + K log det Sigma_imu.
+Block coordinate descent (spec 8.3): chi-step = ``lm_iters`` Levenberg-Marquardt iterations with
+Sigma fixed (a step is accepted only if J decreases, else the damping is raised), Sigma-step in
+closed form (:func:`sigma_step`), stop at a relative decrease < ``rel_tol`` or ``max_iter``
+iterations. Units: angles in rad, translations in m, image coordinates normalized.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
-from ._checks import as_points, finite_scalar, need
-from .errors import DegenerateInput
+from ._checks import as_covs, as_matrix, as_points, finite_scalar, need, same_length
+from .errors import DegenerateInput, ShapeError
+from .lie import (
+    drot_z,
+    exp_so3,
+    project,
+    project_jacobian,
+    rot_x,
+    rot_y,
+    rot_z,
+    rtilt,
+    tilt_angles,
+    wrap_angle,
+)
 
 
 def sigma_step(residuals, lo, hi) -> np.ndarray:
@@ -38,3 +69,347 @@ def sigma_objective(Sigma, residuals) -> float:
     if sign <= 0:
         raise DegenerateInput("Sigma not positive definite")
     return float(np.trace(np.linalg.solve(Sigma, S)) + len(r) * logdet)
+
+
+# ---------------------------------------------------------------------------------------------
+# Window / state containers
+
+
+@dataclass
+class FusionWindow:
+    """Measurements of one BCD window (spec 8.1).
+
+    Vision: ``p`` (n, 3) keyframe-left points with covariances ``cov`` (n, 3, 3) (m, m^2), ``q``
+    (n, 2) normalized current-left coordinates, ``sigma2`` the normalized image variance (the
+    sigma^2 I term of Sigma_vis). ``R_ic`` maps camera vectors into the IMU frame.
+    IMU: ``acc_dir`` (K, 3) bias-corrected *unit* accelerometer directions at the K samples
+    (k = 0 keyframe, k = K-1 current frame), ``gyro_inc`` (K-1, 3) bias-corrected gyro rotation
+    increments (omega_k - b_g) dt [rad] between samples k and k+1, ``gyro_var`` the variance of one
+    gyro-chain residual (sigma_g^2 dt with sigma_g the white-noise density, rad^2).
+    Prior: keyframe roll/pitch ``prior_mean`` (2,) and ``prior_cov`` (2, 2) (rad, rad^2), e.g. the
+    previous window's last tilt and :attr:`FusionState.cov_last_tilt`.
+    ``lo``/``hi``: eigenvalue bounds of Sigma_imu [PROPOSAL lo = (sigma_a/g)^2, hi = 0.2^2].
+    Initial relative pose ``psi0``/``t0`` (spec 6); ``tilts0`` (K, 2) defaults to gyro propagation
+    from ``prior_mean``.
+    """
+
+    p: np.ndarray
+    cov: np.ndarray
+    q: np.ndarray
+    sigma2: float
+    R_ic: np.ndarray
+    acc_dir: np.ndarray
+    gyro_inc: np.ndarray
+    gyro_var: float
+    prior_mean: np.ndarray
+    prior_cov: np.ndarray
+    psi0: float
+    t0: np.ndarray
+    lo: float
+    hi: float = 0.2**2
+    tilts0: np.ndarray | None = None
+
+
+@dataclass
+class FusionState:
+    """BCD estimate: relative yaw ``psi`` (rad), ``t`` = t_CK (m), absolute tilts (K, 2) as
+    (roll, pitch) per IMU sample (rad); ``cov_last_tilt`` (2, 2) the marginal covariance of the
+    last (current-frame) tilt from (J^T J)^-1 at the solution (the next window's prior)."""
+
+    psi: float
+    t: np.ndarray
+    tilts: np.ndarray
+    cov_last_tilt: np.ndarray = field(default_factory=lambda: np.full((2, 2), np.nan))
+
+    def R_ck(self, R_ic) -> np.ndarray:
+        R_ic = np.asarray(R_ic, float)
+        return R_ic.T @ rtilt(*self.tilts[-1]).T @ rot_z(self.psi) @ rtilt(*self.tilts[0]) @ R_ic
+
+    def as_vector(self) -> np.ndarray:
+        return np.r_[self.psi, self.t, self.tilts.ravel()]
+
+
+def propagate_tilts(tilt1, gyro_inc) -> np.ndarray:
+    """Roll/pitch at every sample by gyro propagation from ``tilt1`` (yaw-invariant, spec 8.1.3):
+    tilt_{k+1} = tilt(R_tilt(tilt_k) Exp(gyro_inc_k)). Returns (K, 2)."""
+    dR = exp_so3(np.asarray(gyro_inc, float))
+    out = np.empty((len(dR) + 1, 2))
+    out[0] = tilt1
+    for k in range(len(dR)):  # sequential by nature (K - 1 <= ~40 samples)
+        out[k + 1] = tilt_angles(rtilt(*out[k]) @ dR[k])
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Residuals and Jacobians (vectorized over points and samples)
+
+
+def _gravity_dir(tilts):
+    """g = R_tilt^T e3 = (-s_th, c_th s_ph, c_th c_ph) and its derivatives (K, 3) each."""
+    ph, th = tilts[:, 0], tilts[:, 1]
+    sp, cp, st, ct = np.sin(ph), np.cos(ph), np.sin(th), np.cos(th)
+    g = np.column_stack([-st, ct * sp, ct * cp])
+    dg_ph = np.column_stack([np.zeros_like(ph), ct * cp, -ct * sp])
+    dg_th = np.column_stack([-ct, -st * sp, -st * cp])
+    return g, dg_ph, dg_th
+
+
+def _drtilt(ph, th):
+    """d R_tilt / d roll and d R_tilt / d pitch (R_tilt = Ry(th) Rx(ph))."""
+    c, s = np.cos(ph), np.sin(ph)
+    dRx = np.array([[0.0, 0.0, 0.0], [0.0, -s, -c], [0.0, c, -s]])
+    c, s = np.cos(th), np.sin(th)
+    dRy = np.array([[-s, 0.0, c], [0.0, 0.0, 0.0], [-c, 0.0, -s]])
+    return rot_y(th) @ dRx, dRy @ rot_x(ph)
+
+
+def _chol2_inv(C):
+    """Inverse lower Cholesky factor of 2x2 SPD matrices (..., 2, 2): W with W C W^T = I."""
+    a, b, c = C[..., 0, 0], C[..., 1, 0], C[..., 1, 1]
+    if np.any(a <= 0):
+        raise DegenerateInput("covariance not positive definite")
+    l11 = np.sqrt(a)
+    l21 = b / l11
+    d = c - l21 * l21
+    if np.any(d <= 0):
+        raise DegenerateInput("covariance not positive definite")
+    l22 = np.sqrt(d)
+    W = np.zeros(C.shape)
+    W[..., 0, 0] = 1.0 / l11
+    W[..., 1, 1] = 1.0 / l22
+    W[..., 1, 0] = -l21 / (l11 * l22)
+    return W
+
+
+class _Problem:
+    """Whitened residual vector and Jacobian of one window for a fixed Sigma_imu."""
+
+    def __init__(self, w: FusionWindow, Wvis):
+        self.w = w
+        self.Wvis = Wvis  # (n, 2, 2) inverse Cholesky factors of Sigma_vis
+        self.a = w.p @ w.R_ic.T  # points in the keyframe IMU-oriented frame
+        self.K = len(w.acc_dir)
+        self.dR = exp_so3(w.gyro_inc)  # (K-1, 3, 3)
+        self.Wg = 1.0 / np.sqrt(w.gyro_var)
+        self.Wp = _chol2_inv(w.prior_cov)
+        n = len(w.p)
+        self.nv, self.ng, self.nc = 2 * n, 3 * self.K, 2 * (self.K - 1)
+        self.dim = 4 + 2 * self.K
+
+    def unpack(self, x):
+        return x[0], x[1:4], x[4:].reshape(self.K, 2)
+
+    def vis(self, x, jac=True):
+        psi, t, T = self.unpack(x)
+        w = self.w
+        B1, BK, Z = rtilt(*T[0]), rtilt(*T[-1]), rot_z(psi)
+        Ric = w.R_ic
+        M = Ric.T @ BK.T @ Z @ B1  # X = a @ M^T + t
+        X = self.a @ M.T + t
+        if np.any(X[:, 2] <= 0):
+            return None, None
+        r = w.q - project(X)
+        rw = np.einsum("nij,nj->ni", self.Wvis, r)
+        if not jac:
+            return rw.ravel(), None
+        d1p, d1t = _drtilt(*T[0])
+        dKp, dKt = _drtilt(*T[-1])
+        mats = (
+            Ric.T @ BK.T @ drot_z(psi) @ B1,
+            Ric.T @ BK.T @ Z @ d1p,
+            Ric.T @ BK.T @ Z @ d1t,
+            Ric.T @ dKp.T @ Z @ B1,
+            Ric.T @ dKt.T @ Z @ B1,
+        )
+        dX = np.stack([self.a @ Mj.T for Mj in mats], axis=2)  # (n, 3, 5)
+        P = project_jacobian(X)  # (n, 2, 3)
+        WP = -self.Wvis @ P  # d rw / d X
+        J = np.zeros((len(X), 2, self.dim))
+        J[:, :, 1:4] = WP
+        Jr = WP @ dX  # (n, 2, 5)
+        J[:, :, 0] = Jr[:, :, 0]
+        J[:, :, 4:6] += Jr[:, :, 1:3]
+        J[:, :, self.dim - 2:] += Jr[:, :, 3:5]
+        return rw.ravel(), J.reshape(-1, self.dim)
+
+    def imu_raw(self, x):
+        _, _, T = self.unpack(x)
+        g, dgp, dgt = _gravity_dir(T)
+        return self.w.acc_dir - g, g, dgp, dgt
+
+    def chain(self, T, g, dgp, dgt, jac=True):
+        m = np.einsum("kji,kj->ki", self.dR, g[:-1])  # dR_k^T g_k
+        roll = np.arctan2(m[:, 1], m[:, 2])
+        pitch = -np.arcsin(np.clip(m[:, 0], -1.0, 1.0))
+        r = np.column_stack([wrap_angle(T[1:, 0] - roll), T[1:, 1] - pitch]) * self.Wg
+        if not jac:
+            return r.ravel(), None
+        Km = self.K - 1
+        h = m[:, 1] ** 2 + m[:, 2] ** 2
+        dpred = np.zeros((Km, 2, 3))
+        dpred[:, 0, 1] = m[:, 2] / h
+        dpred[:, 0, 2] = -m[:, 1] / h
+        dpred[:, 1, 0] = -1.0 / np.sqrt(np.maximum(1.0 - m[:, 0] ** 2, 1e-300))
+        dm = np.einsum("kji,kjc->kic", self.dR, np.stack([dgp[:-1], dgt[:-1]], axis=2))  # (Km, 3, 2)
+        J = np.zeros((Km, 2, self.dim))
+        rows = np.arange(Km)
+        Jk = -self.Wg * (dpred @ dm)  # w.r.t. tilt k
+        for c in range(2):
+            J[rows, :, 4 + 2 * rows + c] = Jk[:, :, c]
+            J[rows, c, 4 + 2 * (rows + 1) + c] = self.Wg
+        return r.ravel(), J.reshape(-1, self.dim)
+
+    def evaluate(self, x, Lsig_inv, jac=True):
+        """Stacked whitened residuals (vis, gravity, chain, prior) [and Jacobian]; None if invalid."""
+        rv, Jv = self.vis(x, jac)
+        if rv is None:
+            return None, None, None
+        _, _, T = self.unpack(x)
+        ri, g, dgp, dgt = self.imu_raw(x)
+        rc, Jc = self.chain(T, g, dgp, dgt, jac)
+        rp = self.Wp @ np.array([wrap_angle(T[0, 0] - self.w.prior_mean[0]), T[0, 1] - self.w.prior_mean[1]])
+        r = np.concatenate([rv, (ri @ Lsig_inv.T).ravel(), rc, rp])
+        if not jac:
+            return r, ri, None
+        Ji = np.zeros((self.K, 3, self.dim))
+        rows = np.arange(self.K)
+        Ji[rows, :, 4 + 2 * rows] = -dgp @ Lsig_inv.T
+        Ji[rows, :, 5 + 2 * rows] = -dgt @ Lsig_inv.T
+        Jp = np.zeros((2, self.dim))
+        Jp[:, 4:6] = self.Wp
+        J = np.concatenate([Jv, Ji.reshape(-1, self.dim), Jc, Jp])
+        return r, ri, J
+
+
+def _vis_covariance(w: FusionWindow, x0):
+    """Sigma_vis_i = J_h Sigma_i J_h^T + sigma^2 I at the initial estimate (spec 8.1.1 PROPOSAL)."""
+    K = len(w.acc_dir)
+    T = x0[4:].reshape(K, 2)
+    R = w.R_ic.T @ rtilt(*T[-1]).T @ rot_z(x0[0]) @ rtilt(*T[0]) @ w.R_ic
+    X = w.p @ R.T + x0[1:4]
+    if np.any(X[:, 2] <= 0):
+        raise DegenerateInput("bcd_refine: point behind the current camera at the initial estimate")
+    Jh = project_jacobian(X) @ R
+    S = Jh @ w.cov @ np.swapaxes(Jh, 1, 2) + w.sigma2 * np.eye(2)
+    return S
+
+
+def _check_window(w: FusionWindow) -> FusionWindow:
+    p = as_points(w.p, 3, "p")
+    q = as_points(w.q, 2, "q")
+    n = same_length(p, q)
+    need(n, 3)
+    cov = as_covs(w.cov, n, 3, "cov")
+    acc = as_points(w.acc_dir, 3, "acc_dir")
+    K = len(acc)
+    need(K, 2, "IMU samples")
+    gyr = as_points(w.gyro_inc, 3, "gyro_inc")
+    if len(gyr) != K - 1:
+        raise ShapeError(f"gyro_inc must have K-1 = {K - 1} rows, got {len(gyr)}")
+    tilts0 = None if w.tilts0 is None else as_points(w.tilts0, 2, "tilts0")
+    if tilts0 is not None and len(tilts0) != K:
+        raise ShapeError("tilts0 must have shape (K, 2)")
+    lo, hi = finite_scalar(w.lo, "lo"), finite_scalar(w.hi, "hi")
+    if not 0 < lo <= hi:
+        raise DegenerateInput("bcd_refine needs 0 < lo <= hi")
+    gv = finite_scalar(w.gyro_var, "gyro_var")
+    s2 = finite_scalar(w.sigma2, "sigma2")
+    if gv <= 0 or s2 < 0:
+        raise DegenerateInput("gyro_var must be > 0 and sigma2 >= 0")
+    return FusionWindow(
+        p=p, cov=cov, q=q, sigma2=s2, R_ic=as_matrix(w.R_ic, (3, 3), "R_ic"), acc_dir=acc, gyro_inc=gyr,
+        gyro_var=gv, prior_mean=as_matrix(w.prior_mean, (2,), "prior_mean"),
+        prior_cov=as_matrix(w.prior_cov, (2, 2), "prior_cov"), psi0=finite_scalar(w.psi0, "psi0"),
+        t0=as_matrix(w.t0, (3,), "t0"), lo=lo, hi=hi, tilts0=tilts0)
+
+
+def _sigma_parts(Sigma):
+    Lc = np.linalg.cholesky(Sigma)
+    return np.linalg.inv(Lc), 2.0 * float(np.sum(np.log(np.diag(Lc))))
+
+
+def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm_iters=2, mu0=1e-4):
+    """Block coordinate descent of spec 8.3 -> (FusionState, Sigma_imu (3, 3), cost_history).
+
+    ``cost_history`` lists J(chi, Sigma) at the start and after every chi-step and Sigma-step
+    (non-increasing by construction). ``adaptive=False`` keeps Sigma_imu = lo I (the fixed-weight
+    baseline; only chi-steps). LM: (H + mu diag H) d = -g, mu starts at ``mu0``, x10 on a rejected
+    step (up to 10 tries), /10 on an accepted one.
+    """
+    w = _check_window(window)
+    K = len(w.acc_dir)
+    tilts0 = propagate_tilts(w.prior_mean, w.gyro_inc) if w.tilts0 is None else w.tilts0
+    x = np.r_[w.psi0, w.t0, tilts0.ravel()]
+    prob = _Problem(w, _chol2_inv(_vis_covariance(w, x)))
+    Sigma = w.lo * np.eye(3)
+    Linv, logdet = _sigma_parts(Sigma)
+    r, ri, J = prob.evaluate(x, Linv)
+    if r is None:
+        raise DegenerateInput("bcd_refine: invalid initial estimate")
+    cost = float(r @ r) + K * logdet
+    hist = [cost]
+    mu = mu0
+    for _ in range(max_iter):
+        start = cost
+        # chi-step: LM with Sigma fixed, accept only decreases
+        for _ in range(lm_iters):
+            H = J.T @ J
+            gvec = J.T @ r
+            dH = np.diag(H).copy()
+            accepted = False
+            for _ in range(10):
+                try:
+                    d = np.linalg.solve(H + mu * np.diag(dH), -gvec)
+                except np.linalg.LinAlgError:
+                    mu *= 10.0
+                    continue
+                xn = x + d
+                rn, rin, Jn = prob.evaluate(xn, Linv)
+                if rn is not None:
+                    cn = float(rn @ rn) + K * logdet
+                    if cn < cost:
+                        x, r, ri, J, cost = xn, rn, rin, Jn, cn
+                        mu = max(mu / 10.0, 1e-12)
+                        accepted = True
+                        break
+                mu *= 10.0
+            if not accepted:
+                break
+        hist.append(cost)
+        if adaptive:
+            # exact block minimiser; a recomputed cost above the old one can only be rounding
+            # (same Sigma up to 1e-16), in which case the old Sigma is kept
+            Sig_n = sigma_step(ri, w.lo, w.hi)
+            Linv_n, logdet_n = _sigma_parts(Sig_n)
+            r_n, ri_n, J_n = prob.evaluate(x, Linv_n)
+            c_n = float(r_n @ r_n) + K * logdet_n
+            if c_n <= cost:
+                Sigma, Linv, logdet, r, ri, J, cost = Sig_n, Linv_n, logdet_n, r_n, ri_n, J_n, c_n
+            hist.append(cost)
+        if start - cost < rel_tol * abs(start):
+            break
+    H = J.T @ J
+    try:
+        C = np.linalg.inv(H)
+        cov_last = C[-2:, -2:].copy()
+    except np.linalg.LinAlgError:
+        cov_last = np.full((2, 2), np.nan)
+    state = FusionState(psi=float(wrap_angle(x[0])), t=x[1:4].copy(), tilts=x[4:].reshape(K, 2).copy(),
+                        cov_last_tilt=cov_last)
+    return state, Sigma, hist
+
+
+def joint_cost(window: FusionWindow, state: FusionState, Sigma, x_init=None) -> float:
+    """J(chi, Sigma) of spec 8.2 for a state (Sigma_vis fixed at ``x_init``, default the window's
+    initial estimate as in :func:`bcd_refine`)."""
+    w = _check_window(window)
+    K = len(w.acc_dir)
+    if x_init is None:
+        tilts0 = propagate_tilts(w.prior_mean, w.gyro_inc) if w.tilts0 is None else w.tilts0
+        x_init = np.r_[w.psi0, w.t0, tilts0.ravel()]
+    prob = _Problem(w, _chol2_inv(_vis_covariance(w, x_init)))
+    Linv, logdet = _sigma_parts(np.asarray(Sigma, float))
+    r, _, _ = prob.evaluate(state.as_vector(), Linv, jac=False)
+    if r is None:
+        return np.inf
+    return float(r @ r) + K * logdet

@@ -11,15 +11,34 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._checks import as_covs, as_matrix, as_points, finite_scalar, need, same_length, solve_checked
-from .errors import DegenerateInput, ShapeError
-from .lie import drot_z, homogeneous, rot_z, wrap_angle
+from ._checks import (
+    as_covs,
+    as_matrix,
+    as_points,
+    finite_scalar,
+    need,
+    same_length,
+    solve_checked,
+)
+from .errors import DegenerateInput
+from .lie import drot_z, homogeneous, rot_z, skew, wrap_angle
 
 MIN_POINTS = 3
 _M1 = np.diag([1.0, 1.0, 0.0])
 _M2 = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
 _M3 = -np.diag([0.0, 0.0, 1.0])
 _MS = (_M1, _M2, _M3)
+
+
+def _cross(a, b):
+    """Row-wise cross product of (n, 3) arrays (same products/order as np.cross, less overhead)."""
+    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
+    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
+    out = np.empty(a.shape)
+    out[:, 0] = a1 * b2 - a2 * b1
+    out[:, 1] = a2 * b0 - a0 * b2
+    out[:, 2] = a0 * b1 - a1 * b0
+    return out
 
 
 def row_vectors(q, L_c, rows="orth") -> np.ndarray:
@@ -35,14 +54,14 @@ def row_vectors(q, L_c, rows="orth") -> np.ndarray:
     n = len(u)
     V = np.empty((n, 3, 2))
     if rows == "orth":
-        un = u / np.linalg.norm(u, axis=1, keepdims=True)
+        un = u / np.sqrt(np.einsum("ij,ij->i", u, u))[:, None]
         # helper axis: the coordinate axis least aligned with u
         idx = np.argmin(np.abs(un), axis=1)
         a = np.zeros_like(un)
         a[np.arange(n), idx] = 1.0
-        v1 = np.cross(un, a)
-        v1 /= np.linalg.norm(v1, axis=1, keepdims=True)
-        v2 = np.cross(un, v1)
+        v1 = _cross(un, a)
+        v1 /= np.sqrt(np.einsum("ij,ij->i", v1, v1))[:, None]
+        v2 = _cross(un, v1)
         V[:, :, 0] = v1
         V[:, :, 1] = v2
     elif rows == "paper":
@@ -55,6 +74,21 @@ def row_vectors(q, L_c, rows="orth") -> np.ndarray:
     return V
 
 
+def _A_from(rho, V):
+    """A (n, 2, 5) and b (n, 2) of spec 6.1 from level-frame points rho and rows V (n, 3, 2):
+    a_k = [v_k . M1 rho, v_k . M2 rho, v_k], beta_k = v_k . M3 rho (written out elementwise)."""
+    n = len(rho)
+    r0, r1, r2 = rho[:, 0:1], rho[:, 1:2], rho[:, 2:3]
+    v0, v1, v2 = V[:, 0, :], V[:, 1, :], V[:, 2, :]  # (n, 2) each
+    A = np.empty((n, 2, 5))
+    A[:, :, 0] = v0 * r0 + v1 * r1
+    A[:, :, 1] = v1 * r0 - v0 * r1
+    A[:, :, 2] = v0
+    A[:, :, 3] = v1
+    A[:, :, 4] = v2
+    return A, -v2 * r2
+
+
 def build_A(p, q, L_k, L_c, rows="orth"):
     """Linear system A x = b of spec 6.1, x = [cos psi, sin psi, tau], tau = L_C t_CK.
 
@@ -63,14 +97,30 @@ def build_A(p, q, L_k, L_c, rows="orth"):
     rho = p @ np.asarray(L_k).T
     V = row_vectors(q, L_c, rows)
     n = len(p)
-    C = np.empty((n, 3, 5))
-    C[:, :, 0] = rho @ _M1.T
-    C[:, :, 1] = rho @ _M2.T
-    C[:, :, 2:] = np.eye(3)
-    Vt = np.swapaxes(V, 1, 2)
-    A = Vt @ C  # (n, 2, 5)
-    b = np.einsum("nki,ni->nk", Vt, rho @ _M3.T)
+    A, b = _A_from(rho, V)
     return A.reshape(2 * n, 5), b.reshape(2 * n), V, rho
+
+
+def _bias_terms_frame(cov, V, L=None):
+    """G1, g2 of spec 6.2 with the level-frame covariances L cov L^T (L = None: cov already in
+    the level frame). Uses (G1)_ac = 1/n sum_ik (M_a^T v_ik)^T S_i (M_c^T v_ik)."""
+    n = len(V)
+    Ut = np.zeros((n, 3, 2, 3))  # (point, c, k, coord): (M_c^T v_ik)^T
+    Vt = np.swapaxes(V, 1, 2)  # (n, 2, 3)
+    Ut[:, 0, :, :2] = Vt[:, :, :2]
+    Ut[:, 1, :, 0] = Vt[:, :, 1]
+    Ut[:, 1, :, 1] = -Vt[:, :, 0]
+    Ut[:, 2, :, 2] = -Vt[:, :, 2]
+    if L is not None:
+        # (L^T U)^T = U^T L, so that U^T (L cov L^T) U = (L^T U)^T cov (L^T U); one plain GEMM
+        Ut = (Ut.reshape(6 * n, 3) @ np.asarray(L)).reshape(n, 3, 2, 3)
+    SUt = Ut.reshape(n, 6, 3) @ cov  # rows (S U)^T since cov is symmetric
+    G = np.tensordot(Ut, SUt.reshape(n, 3, 2, 3), axes=([0, 2, 3], [0, 2, 3])) / n
+    G1 = np.zeros((5, 5))
+    g2 = np.zeros(5)
+    G1[:2, :2] = G[:2, :2]
+    g2[:2] = G[:2, 2]
+    return G1, g2
 
 
 def bias_terms(cov_rho, V):
@@ -79,17 +129,7 @@ def bias_terms(cov_rho, V):
     (G1)_ac = 1/n sum_i tr(P_i M_a S_i M_c^T), (g2)_a = 1/n sum_i tr(P_i M_a S_i M_3^T), with
     P_i = sum_k v_ik v_ik^T; only the leading 2x2 block / first two entries are non-zero.
     """
-    n = len(V)
-    P = V @ np.swapaxes(V, 1, 2)
-    PM = [P @ M for M in _MS[:2]]
-    SM = [cov_rho @ M.T for M in _MS]
-    G1 = np.zeros((5, 5))
-    g2 = np.zeros(5)
-    for a in range(2):  # matrix indices, not points
-        for c in range(2):
-            G1[a, c] = np.einsum("nij,nji->", PM[a], SM[c]) / n
-        g2[a] = np.einsum("nij,nji->", PM[a], SM[2]) / n
-    return G1, g2
+    return _bias_terms_frame(np.asarray(cov_rho, float), V)
 
 
 def _inputs4(p, q, L_k, L_c):
@@ -124,14 +164,104 @@ def pnp4_be(p, cov, q, L_k, L_c, rows="orth"):
     p, q, L_k, L_c, n = _inputs4(p, q, L_k, L_c)
     cov = as_covs(cov, n, 3, "cov")
     A, b, V, _ = build_A(p, q, L_k, L_c, rows)
-    cov_rho = L_k @ cov @ L_k.T
-    G1, g2 = bias_terms(cov_rho, V)
+    G1, g2 = _bias_terms_frame(cov, V, L_k)
     x = solve_checked(A.T @ A / n - G1, A.T @ b / n - g2, "pnp4_be")
     return _recover(x, L_c)
 
 
+def pnp4_be_cov(p, cov, q, L_k, L_c, rows="orth"):
+    """BE estimate with its first-order (sandwich) covariance -> (psi, t_CK, C (4, 4)).
+
+    Row residuals e_ik = a_ik^T x - beta_ik = v_ik^T (Rz(psi) rho_i + tau) carry the noise
+    v_ik^T Rz(psi) d(rho_i), so Var(e_i) = V_i^T Rz S_rho_i Rz^T V_i and
+    Cov(x) ~ (A^T A)^-1 [sum_i A_i^T Var(e_i) A_i] (A^T A)^-1; C is mapped to chi = (psi, t_CK)
+    (order psi, t1, t2, t3). Used by :func:`pnp4_gn` (``be_cov``) to keep the BE value along
+    directions where cost (1) carries less information than the BE estimate.
+    """
+    p, q, L_k, L_c, n = _inputs4(p, q, L_k, L_c)
+    cov = as_covs(cov, n, 3, "cov")
+    A, b, V, _ = build_A(p, q, L_k, L_c, rows)
+    G1, g2 = _bias_terms_frame(cov, V, L_k)
+    x = solve_checked(A.T @ A / n - G1, A.T @ b / n - g2, "pnp4_be")
+    psi, t = _recover(x, L_c)
+    # (Rz L_k)^T V_i -> rows in the keyframe frame; Var(e_i) = W_i^T cov_i W_i
+    Wt = np.swapaxes(V, 1, 2) @ (rot_z(psi) @ L_k)  # (n, 2, 3)
+    Ve = Wt @ cov @ np.swapaxes(Wt, 1, 2)  # (n, 2, 2)
+    A3 = A.reshape(n, 2, 5)
+    meat = A.T @ (Ve @ A3).reshape(2 * n, 5)  # sum_i A_i^T Var(e_i) A_i
+    Ninv = np.linalg.inv(A.T @ A)
+    Cx = Ninv @ meat @ Ninv
+    D = np.zeros((4, 5))
+    h = x[0] ** 2 + x[1] ** 2
+    D[0, 0], D[0, 1] = -x[1] / h, x[0] / h
+    D[1:, 2:] = L_c.T
+    return psi, t, D @ Cx @ D.T
+
+
 # ---------------------------------------------------------------------------------------------
 # Epipolar ML cost (1) and its Jacobian
+
+
+def _epipolar_mats(psi, t, L_k, L_c, R_rl, t_rl, jac=True):
+    """Per keyframe image s in (L, R) the matrices whose product with q^h gives the epipolar line
+    l = ([t_Cs]x R_Cs)^T q^h and (``jac``) its derivatives w.r.t. psi and t_k:
+    returns (3, m) with the columns of [E_L, (dE_L/dpsi, [e_k]x R_L), E_R, (...)] side by side."""
+    R = L_c.T @ rot_z(psi) @ L_k
+    Rs_ = (R, R @ R_rl.T)
+    ts_ = (t, t - Rs_[1] @ t_rl)
+    blocks = []
+    if jac:
+        dR = L_c.T @ drot_z(psi) @ L_k
+        dRs_ = (dR, dR @ R_rl.T)
+        dts_ = (None, -dRs_[1] @ t_rl)
+    for s_ in range(2):  # two keyframe images (3x3 matrices only; the point work is batched)
+        Rs, ts = Rs_[s_], ts_[s_]
+        blocks.append(skew(ts) @ Rs)
+        if jac:
+            dE = skew(ts) @ dRs_[s_]
+            if dts_[s_] is not None:
+                dE = dE + skew(dts_[s_]) @ Rs
+            blocks.append(dE)
+            blocks.append(_EK @ Rs)  # (3, 3, 3): [e_k]x R_s
+    return blocks
+
+
+_EK = skew(np.eye(3))  # [e_k]x, k = 0..2
+
+
+def _epipolar(psi, t, z, y, q, L_k, L_c, R_rl, t_rl, jac=True):
+    """Batched over points and both keyframe images; r (n, 2) and J (n, 2, 4) (or None)."""
+    qh = homogeneous(q)
+    n = len(qh)
+    blocks = _epipolar_mats(psi, t, L_k, L_c, R_rl, t_rl, jac)
+    if jac:
+        # M (3, 2*5*3): per image [E, dE/dpsi, [e1]x R, [e2]x R, [e3]x R]; row vector l = q^h M
+        M = np.concatenate([blocks[0][None], blocks[1][None], blocks[2],
+                            blocks[3][None], blocks[4][None], blocks[5]])  # (10, 3, 3)
+        D = (qh @ M.transpose(1, 0, 2).reshape(3, 30)).reshape(n, 2, 5, 3)
+        l = D[:, :, 0, :]
+    else:
+        M = np.concatenate([blocks[0][None], blocks[1][None]])  # (2, 3, 3)
+        l = (qh @ M.transpose(1, 0, 2).reshape(3, 6)).reshape(n, 2, 3)
+    xh = np.empty((n, 2, 3))
+    xh[:, 0, :2] = z
+    xh[:, 1, :2] = y
+    xh[:, :, 2] = 1.0
+    l0, l1 = l[:, :, 0], l[:, :, 1]
+    nrm = np.sqrt(l0 * l0 + l1 * l1)
+    if np.any(nrm <= 1e-300):
+        raise DegenerateInput("epipolar: degenerate epipolar line (zero translation?)")
+    num = l0 * xh[:, :, 0] + l1 * xh[:, :, 1] + l[:, :, 2]
+    d = num / nrm
+    if not jac:
+        return d, None
+    inv = 1.0 / nrm
+    c = num * inv * inv * inv
+    g0 = xh[:, :, 0] * inv - c * l0  # dd/dl (n, 2, 3)
+    g1 = xh[:, :, 1] * inv - c * l1
+    dl = D[:, :, 1:, :]  # (n, 2, 4, 3)
+    J = g0[:, :, None] * dl[..., 0] + g1[:, :, None] * dl[..., 1] + inv[:, :, None] * dl[..., 2]
+    return d, J
 
 
 def epipolar_residuals_jac(psi, t, z, y, q, L_k, L_c, R_rl, t_rl):
@@ -144,38 +274,23 @@ def epipolar_residuals_jac(psi, t, z, y, q, L_k, L_c, R_rl, t_rl):
     R_rl = np.asarray(R_rl, float)
     t_rl = np.asarray(t_rl, float)
     t = np.asarray(t, float)
-    R = L_c.T @ rot_z(psi) @ L_k
-    dR = L_c.T @ drot_z(psi) @ L_k
-    qh = homogeneous(q)
-    n = len(qh)
-    out_r = np.empty((n, 2))
-    out_J = np.empty((n, 2, 4))
-    cams = (
-        (R, t, dR, np.zeros(3), homogeneous(z)),
-        (R @ R_rl.T, t - R @ R_rl.T @ t_rl, dR @ R_rl.T, -dR @ R_rl.T @ t_rl, homogeneous(y)),
-    )
-    for s, (Rs, ts, dRs, dts, xh) in enumerate(cams):  # two keyframe images
-        qxt = np.cross(qh, ts)  # q x t
-        l = qxt @ Rs  # l = R^T (q x t) = ([t]x R)^T q
-        dl_psi = qxt @ dRs + np.cross(qh, dts) @ Rs
-        dl_t = np.stack([np.cross(qh, e) @ Rs for e in np.eye(3)], axis=2)  # (n, 3, 3): d l / d t_k
-        nrm = np.hypot(l[:, 0], l[:, 1])
-        if np.any(nrm <= 1e-300):
-            raise DegenerateInput("epipolar: degenerate epipolar line (zero translation?)")
-        num = np.sum(l * xh, axis=1)
-        d = num / nrm
-        dd_dl = xh / nrm[:, None]
-        dd_dl[:, :2] -= (num / nrm**3)[:, None] * l[:, :2]
-        out_r[:, s] = d
-        out_J[:, s, 0] = np.sum(dd_dl * dl_psi, axis=1)
-        out_J[:, s, 1:] = np.einsum("ni,nik->nk", dd_dl, dl_t)
-    return out_r.reshape(2 * n), out_J.reshape(2 * n, 4)
+    d, J = _epipolar(psi, t, z, y, q, L_k, L_c, R_rl, t_rl)
+    n = len(d)
+    return d.reshape(2 * n), J.reshape(2 * n, 4)
 
 
-def pnp4_gn(psi, t, z, y, q, L_k, L_c, R_rl, t_rl, cond_min=1e-5, on_degenerate="truncate", backtrack=True):
+def pnp4_gn(psi, t, z, y, q, L_k, L_c, R_rl, t_rl, cond_min=1e-5, on_degenerate="truncate", backtrack=True,
+            be_cov=None, sigma2=None):
     """One Gauss-Newton step on sum_i d_iL^2 + d_iR^2 (spec 6.3) -> (psi+, t+).
 
     ``r``/``J`` are the distances and their gradients; chi+ = chi - (J^T J)^-1 J^T r.
+
+    ``be_cov`` (4, 4) with ``sigma2`` (normalized image variance): covariance of the input (BE)
+    estimate, e.g. from :func:`pnp4_be_cov`. Then the step is taken only along the generalized
+    eigen-directions of (J^T J / sigma2, be_cov^-1) whose epipolar information exceeds the BE
+    information (mu >= 1); along the others (the weakly observable baseline direction near the
+    collinear-centre degeneracy, spec 6.3) the BE value is kept. This replaces the
+    ``cond_min`` cut; backtracking is applied as below.
 
     Safeguards (spec 6.3 [PROPOSAL], our parameter choices, see docs/estimators_notes.md):
 
@@ -199,7 +314,13 @@ def pnp4_gn(psi, t, z, y, q, L_k, L_c, R_rl, t_rl, cond_min=1e-5, on_degenerate=
     need(n, 2)
     if on_degenerate not in ("truncate", "raise"):
         raise ValueError("on_degenerate must be 'truncate' or 'raise'")
-    r, J = epipolar_residuals_jac(psi, t, z, y, q, L_k, L_c, R_rl, t_rl)
+    L_k = np.asarray(L_k, float)
+    L_c = np.asarray(L_c, float)
+    R_rl = np.asarray(R_rl, float)
+    t_rl = np.asarray(t_rl, float)
+    r, J = _epipolar(psi, t, z, y, q, L_k, L_c, R_rl, t_rl)
+    r = r.reshape(2 * n)
+    J = J.reshape(2 * n, 4)
     N = J.T @ J
     ev, V = np.linalg.eigh(N)
     if not ev[-1] > 0:
@@ -207,15 +328,26 @@ def pnp4_gn(psi, t, z, y, q, L_k, L_c, R_rl, t_rl, cond_min=1e-5, on_degenerate=
     ok = ev >= cond_min * ev[-1]
     if not ok.all() and on_degenerate == "raise":
         raise DegenerateInput(f"pnp4_gn: ill-conditioned J^T J (ratio {ev[0] / ev[-1]:.3g})")
-    Vk = V[:, ok]
-    delta = Vk @ ((Vk.T @ (J.T @ r)) / ev[ok])
+    if be_cov is None:
+        Vk = V[:, ok]
+        delta = Vk @ ((Vk.T @ (J.T @ r)) / ev[ok])
+    else:
+        if sigma2 is None or not sigma2 > 0:
+            raise ValueError("be_cov needs sigma2 > 0")
+        Lb = np.linalg.cholesky(as_matrix(be_cov, (4, 4), "be_cov"))  # be_cov = Lb Lb^T
+        Fw = Lb.T @ N @ Lb / sigma2  # epipolar information in BE-whitened coordinates
+        mu, Wv = np.linalg.eigh(Fw)
+        keep = mu >= 1.0
+        Wk = Wv[:, keep]
+        delta = Lb @ (Wk @ ((Wk.T @ (Lb.T @ (J.T @ r) / sigma2)) / mu[keep]))
     if not backtrack:
         return float(wrap_angle(psi - delta[0])), t - delta[1:]
     cost0 = r @ r
     for k in range(5):
         a = 0.5**k
         cand = (float(wrap_angle(psi - a * delta[0])), t - a * delta[1:])
-        rc, _ = epipolar_residuals_jac(cand[0], cand[1], z, y, q, L_k, L_c, R_rl, t_rl)
+        rc, _ = _epipolar(cand[0], cand[1], z, y, q, L_k, L_c, R_rl, t_rl, jac=False)
+        rc = rc.reshape(2 * n)
         if rc @ rc <= cost0:
             return cand
     return psi, t.copy()

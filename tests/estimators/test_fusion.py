@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from gevi_cli.estimators import DegenerateInput
+from gevi_cli.estimators import DegenerateInput, ShapeError
 from gevi_cli.estimators.fusion import sigma_objective, sigma_step
 
 
@@ -29,10 +29,137 @@ def test_sigma_step_is_constrained_minimiser(case):
     best = np.inf
     for k in range(6):
         x0 = np.r_[rng.standard_normal(3), rng.standard_normal(3)]
-        best = min(best, minimize(f, x0, method="Nelder-Mead", options=dict(maxiter=6000, xatol=1e-10, fatol=1e-12)).fun)
+        res = minimize(f, x0, method="L-BFGS-B", options=dict(maxiter=2000, ftol=1e-15, gtol=1e-10))
+        best = min(best, minimize(f, res.x, method="Nelder-Mead", options=dict(maxiter=600, xatol=1e-10, fatol=1e-12)).fun)
     assert f_star <= best + 1e-6
+    assert best <= f_star + 1e-3  # the numerical search did reach the optimum (non-vacuous check)
 
 
 def test_sigma_step_bad_bounds():
     with pytest.raises(DegenerateInput):
         sigma_step(np.zeros((3, 3)), 0.0, 1.0)
+
+
+# ------------------------------------------------------------------------------------------------
+# bcd_refine (spec 8.1-8.3)
+
+from gevi_cli.estimators import simulation as sim  # noqa: E402
+from gevi_cli.estimators import triangulate  # noqa: E402
+from gevi_cli.estimators.fusion import (  # noqa: E402
+    FusionState,
+    FusionWindow,
+    _chol2_inv,
+    _Problem,
+    _vis_covariance,
+    bcd_refine,
+    joint_cost,
+    propagate_tilts,
+)
+
+
+def _window(seed=3, noise=True, t0_err=0.0):
+    rng = np.random.default_rng(seed)
+    tr = sim.fusion_trajectory(rng, duration=3.0, sigma_a=0.02 if noise else 1e-9,
+                               sigma_g=1e-4, bias_rw=0.0, b_g_err=0.0)
+    R_ic = sim.R_IC_FORWARD
+    i0, i1 = 100, 120
+    Rwc = tr.R_wi @ R_ic
+    R = Rwc[i1].T @ Rwc[i0]
+    t = Rwc[i1].T @ (tr.pos[i0] - tr.pos[i1])
+    s = sim.make_scene(rng, R, t, 120, noise_q=True, min_depth_c=0.5)
+    if not noise:
+        s.z, s.y, s.q = s.z_o, s.y_o, s.q_o
+    p, cov = triangulate(s.z, s.y, s.R_rl, s.t_rl, s.sigma**2)
+    f = tr.f_meas[i0:i1 + 1]
+    tilt_true = np.column_stack([tr.roll, tr.pitch])[i0:i1 + 1]
+    psi = tr.yaw[i0] - tr.yaw[i1]
+    ginc = (tr.omega_meas[i0:i1] - tr.b_g_est[i0:i1]) * tr.dt
+    if not noise:
+        from gevi_cli.estimators.lie import log_so3
+
+        ginc = log_so3(np.swapaxes(tr.R_wi[i0:i1], 1, 2) @ tr.R_wi[i0 + 1:i1 + 1])
+    w = FusionWindow(p=p, cov=cov, q=s.q, sigma2=s.sigma**2, R_ic=R_ic, acc_dir=f / np.linalg.norm(f, axis=1)[:, None],
+                     gyro_inc=ginc, gyro_var=1e-4**2 * tr.dt,
+                     prior_mean=tilt_true[0], prior_cov=np.eye(2) * np.radians(0.1) ** 2, psi0=psi + t0_err,
+                     t0=t + t0_err, lo=(0.02 / 9.81) ** 2)
+    return w, psi, t, tilt_true, R
+
+
+def test_fusion_residuals_zero_at_truth_and_jacobian(central_diff):
+    w, psi, t, tilts, R = _window(noise=False)
+    st = FusionState(psi, t, tilts)
+    assert np.allclose(st.R_ck(w.R_ic), R, atol=1e-12)
+    x = st.as_vector()
+    prob = _Problem(w, _chol2_inv(_vis_covariance(w, x)))
+    Linv = np.eye(3) * 10.0
+    r, _, J = prob.evaluate(x, Linv)
+    n = len(w.p)
+    # vision / chain / prior residuals vanish at the truth (gravity residual = the acceleration)
+    assert np.max(np.abs(r[:2 * n])) < 1e-6 * np.max(np.abs(J[:2 * n]))
+    assert np.max(np.abs(r[2 * n + 3 * len(tilts):])) < 1e-5
+    xp = x + 1e-3 * np.random.default_rng(0).standard_normal(x.size)
+    _, _, J = prob.evaluate(xp, Linv)
+    Jn = central_diff(lambda v: prob.evaluate(v, Linv, jac=False)[0], xp, h=1e-7)
+    assert np.max(np.abs(J - Jn)) <= 1e-6 * np.max(np.abs(J))
+
+
+def test_propagate_tilts_matches_truth_noise_free():
+    w, _, _, tilts, _ = _window(noise=False)
+    assert np.max(np.abs(propagate_tilts(tilts[0], w.gyro_inc) - tilts)) < 1e-6
+
+
+def test_bcd_cost_non_increasing_and_sigma_step_is_block_minimiser():
+    w, psi, t, _, _ = _window(noise=True, t0_err=2e-3)
+    st, Sigma, hist = bcd_refine(w)
+    assert np.all(np.diff(hist) <= 1e-9 * np.abs(np.asarray(hist[:-1])))
+    assert 2 <= len(hist) <= 1 + 2 * 6
+    ev = np.linalg.eigvalsh(Sigma)
+    assert ev.min() >= w.lo * (1 - 1e-12) and ev.max() <= w.hi * (1 + 1e-12)
+    # the returned Sigma is the closed-form minimiser for the returned chi
+    g = np.column_stack([-np.sin(st.tilts[:, 1]), np.cos(st.tilts[:, 1]) * np.sin(st.tilts[:, 0]),
+                         np.cos(st.tilts[:, 1]) * np.cos(st.tilts[:, 0])])
+    assert np.allclose(Sigma, sigma_step(w.acc_dir - g, w.lo, w.hi), atol=1e-15)
+    c_star = joint_cost(w, st, Sigma)
+    assert np.isclose(c_star, hist[-1], rtol=1e-9)
+    ev, V = np.linalg.eigh(Sigma)  # feasible perturbations of the eigenvalues cost more
+    for f in (0.8, 1.25):
+        alt = (V * np.clip(ev * f, w.lo, w.hi)) @ V.T
+        assert joint_cost(w, st, alt) >= c_star - 1e-9
+    assert np.all(np.linalg.eigvalsh(st.cov_last_tilt) > 0)
+    # the refinement improves the perturbed start
+    assert abs(st.psi - psi) < 1e-3 and np.linalg.norm(st.t - t) < 0.01
+    assert hist[-1] < hist[0]
+
+
+def test_bcd_fixed_weight_keeps_sigma():
+    w, *_ = _window(noise=True)
+    _, Sigma, hist = bcd_refine(w, adaptive=False)
+    assert np.allclose(Sigma, w.lo * np.eye(3))
+    assert np.all(np.diff(hist) <= 0)
+
+
+def test_bcd_bad_window():
+    w, *_ = _window(noise=True)
+    w.gyro_inc = w.gyro_inc[:-1]
+    with pytest.raises(ShapeError):
+        bcd_refine(w)
+
+
+@pytest.fixture(scope="module")
+def fusion_run():
+    # 60 s of the 150 s protocol (scripts/fig4_fusion.py), seed 0: |a| covers 1.2 periods of the
+    # 50 s cycle incl. the 1 m/s^2 peak and the 0 trough; the full 150 s run is reported in
+    # docs/estimators_notes.md.
+    rng = np.random.default_rng(0)
+    tr = sim.fusion_trajectory(rng, duration=60.0)
+    return sim.run_fusion(tr, rng, modes=("adaptive", "fixed"))
+
+
+def test_fusion_adaptive_accuracy(fusion_run):
+    r = fusion_run
+    for c in (0, 1):
+        assert r.rmse_deg("adaptive", c) <= 0.3, (c, r.rmse_deg("adaptive", c))
+        assert r.rmse_deg("adaptive", c) < r.rmse_deg("fixed", c)
+    assert r.max_cost_increase <= 0.0
+    # Sigma_imu tracks the acceleration magnitude
+    assert np.corrcoef(r.acc_mag, r.sqrt_tr_sigma)[0, 1] > 0.8
