@@ -3,7 +3,7 @@
 Prints the median ms per ``epipolar_local_ba`` call (default options: Huber, built-in LM, 10
 iterations; 1 px noise, start with 8 % scale error + 0.3 deg + 2 cm) for K = 3, 5, 8 frames and
 100 / 200 features, and ms per ``preintegrate`` of 0.1 s at 200 Hz (20 samples), plus the batched
-form over 30 such intervals. The window simulator is the one of ``tests/estimators/test_epipolar_ba.py``.
+form over 30 such intervals. The window simulator is ``gevi_cli.estimators.simulation.ba_window``.
 
     /work/venv/bin/python scripts/bench_ba.py [--repeat 5] [--scipy]
 """
@@ -11,23 +11,13 @@ form over 30 such intervals. The window simulator is the one of ``tests/estimato
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import time
-from pathlib import Path
 
 import numpy as np
 
 from gevi_cli.estimators.epipolar_ba import BAOptions, epipolar_local_ba
 from gevi_cli.estimators.preintegration import preintegrate, preintegrate_batch
-
-_TEST = Path(__file__).resolve().parents[1] / "tests" / "estimators" / "test_epipolar_ba.py"
-
-
-def _load_sim():
-    spec = importlib.util.spec_from_file_location("_ba_sim", _TEST)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+from gevi_cli.estimators.simulation import ba_window, perturb_ba_window
 
 
 def _median_ms(fn, repeat):
@@ -44,13 +34,12 @@ def main():
     ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--scipy", action="store_true", help="also time solver='scipy' (dense trf and sparse lsmr)")
     a = ap.parse_args()
-    sim = _load_sim()
     print("epipolar_local_ba [ms per call, median]")
     print(f"{'K':>3} {'n':>5} {'resid':>7} {'iters':>5} {'lm':>9}" + ("  scipy-dense scipy-sparse" if a.scipy else ""))
     for K in (3, 5, 8):
         for n in (100, 200):
-            w, R, t = sim.make_window(7 + K, K=K, n=n, sigma_px=1.0)
-            w = sim.perturb(w, K, t_sigma=0.02)
+            w, R, t = ba_window(7 + K, K=K, n=n, sigma_px=1.0)
+            w = perturb_ba_window(w, K, t_sigma=0.02)
             res = epipolar_local_ba(w)
             line = f"{K:>3} {n:>5} {res.n_residuals:>7} {res.nfev:>5} {_median_ms(lambda: epipolar_local_ba(w), a.repeat):>9.1f}"
             if a.scipy:

@@ -253,7 +253,8 @@ def run_fusion(traj: FusionTrajectory, rng, n=200, window=0.2, R_ic=None, modes=
     accelerometer direction, see docs/estimators_notes.md).
     """
     from .fusion import FusionWindow, bcd_refine, propagate_tilts
-    from .lie import levelling, tilt_angles as _tilt
+    from .lie import levelling
+    from .lie import tilt_angles as _tilt
     from .pnp4 import pnp4_be, pnp4_gn
     from .pnp6 import pnp6_be, pnp6_refine
     from .triangulation import triangulate
@@ -316,3 +317,100 @@ def run_fusion(traj: FusionTrajectory, rng, n=200, window=0.2, R_ic=None, modes=
 
 def wrap_angle_np(a):
     return float((a + np.pi) % (2 * np.pi) - np.pi)
+
+
+# ----------------------------------------------------------------------------- IMU (spec 9)
+#: Gravity in the z-up world frame (m/s^2).
+G_W = np.array([0.0, 0.0, -9.81])
+
+
+class SinTraj:
+    """Sinusoidal position and ZYX attitude ``R_WI = Rz(yaw) Ry(pitch) Rx(roll)`` (world z up).
+
+    Every quantity (rate, specific force, their derivatives) is in closed form.
+    """
+
+    def __init__(self, rot_amp=(0.3, 0.25, 0.6), rot_w=(1.3, 1.7, 0.9), pos_amp=(1.0, 0.8, 0.3),
+                 pos_w=(0.9, 1.1, 1.6), phase=(0.1, 0.7, 1.3)):
+        self.ra, self.rw = np.array(rot_amp, float), np.array(rot_w, float)
+        self.pa, self.pw = np.array(pos_amp, float), np.array(pos_w, float)
+        self.ph = np.array(phase, float)
+
+    def euler(self, t, d=0):
+        """(roll, pitch, yaw) and their d-th time derivative, t (n,) -> (n, 3)."""
+        arg = np.outer(t, self.rw) + self.ph
+        return self.ra * self.rw**d * np.sin(arg + d * np.pi / 2)
+
+    def R(self, t):
+        e = self.euler(np.atleast_1d(t))
+        return rot_z(e[:, 2]) @ rot_y(e[:, 1]) @ rot_x(e[:, 0])
+
+    def pos(self, t, d=0):
+        arg = np.outer(np.atleast_1d(t), self.pw) + self.ph[::-1]
+        return self.pa * self.pw**d * np.sin(arg + d * np.pi / 2)
+
+    def omega(self, t):
+        """Body rate for ZYX Euler angles: [r' - y' sp, p' cr + y' cp sr, -p' sr + y' cp cr]."""
+        t = np.atleast_1d(t)
+        r, p, _ = self.euler(t).T
+        dr, dp, dy = self.euler(t, 1).T
+        return np.column_stack([dr - dy * np.sin(p), dp * np.cos(r) + dy * np.cos(p) * np.sin(r),
+                                -dp * np.sin(r) + dy * np.cos(p) * np.cos(r)])
+
+    def specific_force(self, t):
+        """a_I = R_WI^T (p'' - g_W)."""
+        t = np.atleast_1d(t)
+        return np.einsum("nji,nj->ni", self.R(t), self.pos(t, 2) - G_W)
+
+
+# --------------------------------------------------------------------- BA window (spec 10)
+def ba_window(seed, K=5, n=150, sigma_px=0.0, drop=0.1):
+    """A simulated spec-10 BA window with its true poses: ``(BAWindow, R_true, t_true)``.
+
+    Forward-moving stereo rig (b = 0.2 m, R_RL = I, t_RL = (-b, 0, 0)), KF2 about 1 m ahead of KF1,
+    K intermediate frames on the way with small rotations (< 3 deg); points at depth 3-15 m in KF1;
+    each feature is dropped from each image with probability ``drop`` (and only kept where it
+    projects inside the 800x800 image at f = 1100); ids shuffled per image.  Poses are frame-in-KF1.
+    """
+    from .epipolar_ba import BAWindow, ImageObs, euler_zyx
+
+    HALF = IMAGE / 2 / F_PX
+    rng = np.random.default_rng(seed)
+    s = np.arange(1, K + 2) / (K + 1)
+    t = s[:, None] * np.array([0.15, -0.05, 1.0]) + rng.normal(size=(K + 1, 3)) * 0.02
+    R = euler_zyx(s[:, None] * np.deg2rad([1.5, 3.0, 2.0]) + rng.normal(size=(K + 1, 3)) * 0.005)
+    Z = rng.uniform(3.0, 15.0, 4 * n)
+    P = np.column_stack([rng.uniform(-HALF, HALF, (4 * n, 2)) * Z[:, None], Z])
+    # image slots: KF1-L, KF1-R, F_1..F_K, KF2-L, KF2-R
+    slot_pose = [(np.eye(3), np.zeros(3), False), (np.eye(3), np.zeros(3), True)]
+    slot_pose += [(R[k], t[k], False) for k in range(K)] + [(R[K], t[K], False), (R[K], t[K], True)]
+    proj, ok = [], np.ones(len(P), bool)
+    for Rk, tk, right in slot_pose:
+        X = (P - tk) @ Rk  # R^T (P - t)
+        if right:
+            X = X @ R_RL.T + T_RL
+        x = X[:, :2] / X[:, 2:3]
+        ok &= (X[:, 2] > 0.5) & np.all(np.abs(x) < HALF, axis=1)
+        proj.append(x)
+    idx = np.flatnonzero(ok)[:n]
+    if idx.size < n:
+        raise ValueError(f"only {idx.size} of {n} points visible in every image")
+    ids_all = rng.permutation(10_000)[:n]
+    sigma = sigma_px / F_PX
+    obs = []
+    for x in proj:
+        keep = rng.random(n) > drop
+        order = rng.permutation(np.flatnonzero(keep))
+        obs.append(ImageObs(ids_all[order], x[idx][order] + rng.normal(size=(order.size, 2)) * sigma))
+    w = BAWindow(obs[0], obs[1], obs[2:2 + K], obs[K + 2], obs[K + 3], R, t, R_RL, T_RL,
+                 sigma=sigma if sigma_px > 0 else None)
+    return w, R, t
+
+
+def perturb_ba_window(w, seed, scale=1.08, rot_deg=0.3, t_sigma=0.0):
+    """Perturb the initial poses of a BA window in place: scale error, rotation noise (deg), translation noise (m)."""
+    rng = np.random.default_rng(seed + 1000)
+    K1 = w.R_init.shape[0]
+    w.R_init = w.R_init @ exp_so3(rng.normal(size=(K1, 3)) * np.deg2rad(rot_deg) / np.sqrt(3))
+    w.t_init = w.t_init * scale + rng.normal(size=(K1, 3)) * t_sigma
+    return w

@@ -1,10 +1,7 @@
 """Epipolar local BA (spec 10): truth, Jacobian, recovery from 8 % scale error, scale observability,
 noise reduction, kernels and input errors.
 
-Window simulation: forward-moving stereo rig (b = 0.2 m, R_RL = I, t_RL = (-b, 0, 0)), KF2 about
-1 m ahead of KF1, K intermediate frames on the way with small rotations (< 3 deg); points at depth
-3–15 m in KF1; each feature is dropped from each image with probability 10 % (and only kept where
-it projects inside an 800x800 image at f = 1100); ids shuffled per image.
+The window simulator is ``simulation.ba_window``.
 """
 
 import numpy as np
@@ -21,52 +18,10 @@ from gevi_cli.estimators.epipolar_ba import (
     euler_zyx_from_R,
     poses_from_tracking,
 )
-from gevi_cli.estimators.lie import exp_so3, rotation_error
-
-F = 1100.0
-R_RL = np.eye(3)
-T_RL = np.array([-0.2, 0.0, 0.0])
-HALF = 400.0 / F
-
-
-def make_window(seed, K=5, n=150, sigma_px=0.0, drop=0.1):
-    rng = np.random.default_rng(seed)
-    s = np.arange(1, K + 2) / (K + 1)
-    t = s[:, None] * np.array([0.15, -0.05, 1.0]) + rng.normal(size=(K + 1, 3)) * 0.02
-    R = euler_zyx(s[:, None] * np.deg2rad([1.5, 3.0, 2.0]) + rng.normal(size=(K + 1, 3)) * 0.005)
-    Z = rng.uniform(3.0, 15.0, 4 * n)
-    P = np.column_stack([rng.uniform(-HALF, HALF, (4 * n, 2)) * Z[:, None], Z])
-    # image slots: KF1-L, KF1-R, F_1..F_K, KF2-L, KF2-R
-    slot_pose = [(np.eye(3), np.zeros(3), False), (np.eye(3), np.zeros(3), True)]
-    slot_pose += [(R[k], t[k], False) for k in range(K)] + [(R[K], t[K], False), (R[K], t[K], True)]
-    proj, ok = [], np.ones(len(P), bool)
-    for Rk, tk, right in slot_pose:
-        X = (P - tk) @ Rk  # R^T (P - t)
-        if right:
-            X = X @ R_RL.T + T_RL
-        x = X[:, :2] / X[:, 2:3]
-        ok &= (X[:, 2] > 0.5) & np.all(np.abs(x) < HALF, axis=1)
-        proj.append(x)
-    idx = np.flatnonzero(ok)[:n]
-    assert idx.size == n
-    ids_all = rng.permutation(10_000)[:n]
-    sigma = sigma_px / F
-    obs = []
-    for x in proj:
-        keep = rng.random(n) > drop
-        order = rng.permutation(np.flatnonzero(keep))
-        obs.append(ImageObs(ids_all[order], x[idx][order] + rng.normal(size=(order.size, 2)) * sigma))
-    w = BAWindow(obs[0], obs[1], obs[2:2 + K], obs[K + 2], obs[K + 3], R, t, R_RL, T_RL,
-                 sigma=sigma if sigma_px > 0 else None)
-    return w, R, t
-
-
-def perturb(w, seed, scale=1.08, rot_deg=0.3, t_sigma=0.0):
-    rng = np.random.default_rng(seed + 1000)
-    K1 = w.R_init.shape[0]
-    w.R_init = w.R_init @ exp_so3(rng.normal(size=(K1, 3)) * np.deg2rad(rot_deg) / np.sqrt(3))
-    w.t_init = w.t_init * scale + rng.normal(size=(K1, 3)) * t_sigma
-    return w
+from gevi_cli.estimators.lie import rotation_error
+from gevi_cli.estimators.simulation import R_RL, T_RL
+from gevi_cli.estimators.simulation import ba_window as make_window
+from gevi_cli.estimators.simulation import perturb_ba_window as perturb
 
 
 def pose_errors(R, t, R_true, t_true):

@@ -1,27 +1,23 @@
 """Stereo–IMU initialisation (spec 9): noise-free exactness, noisy cases, b_a prior, errors.
 
-Simulation: the ``SinTraj`` of ``test_preintegration.py`` gives the *measured* IMU samples
+Simulation: ``simulation.SinTraj`` gives the *measured* IMU samples
 (closed-form rate and specific force at 200 Hz, plus constant biases); the ground-truth IMU poses
 and velocities are the exact zero-order-hold integration of the noise-free samples, so that
 noise-free preintegration is exact (no discretisation error). Keyframes every 20 samples (10 Hz)
 over 3 s (31 keyframes); forward-looking camera ``R_IC`` with a lever arm.
 """
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from gevi_cli.estimators import DegenerateInput, NonFiniteInput, TooFewPoints
-from gevi_cli.estimators.initialization import InitOptions, gravity_to_R_WV, stereo_imu_init
+from gevi_cli.estimators.initialization import (
+    InitOptions,
+    gravity_to_R_WV,
+    stereo_imu_init,
+)
 from gevi_cli.estimators.lie import exp_so3
-from gevi_cli.estimators.simulation import R_IC_FORWARD
-
-_spec = importlib.util.spec_from_file_location("_preint_helpers", Path(__file__).with_name("test_preintegration.py"))
-_helpers = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_helpers)
-SinTraj, G_W = _helpers.SinTraj, _helpers.G_W
+from gevi_cli.estimators.simulation import G_W, R_IC_FORWARD, SinTraj
 
 RATE = 200
 DT_NS = 5_000_000

@@ -1,7 +1,12 @@
 import numpy as np
 import pytest
 
-from gevi_cli.estimators import TooFewPoints, sigma2_onesided, sigma2_stereo, sigma2_symmetric
+from gevi_cli.estimators import (
+    TooFewPoints,
+    sigma2_onesided,
+    sigma2_stereo,
+    sigma2_symmetric,
+)
 from gevi_cli.estimators import simulation as sim
 
 SIG = 2.5 / 1100.0

@@ -7,12 +7,12 @@ from gevi_cli.estimators import (
     TooFewPoints,
     bias_matrix_G,
     build_H,
+    depth_weights,
     pnp6_be,
     pnp6_l1,
     pnp6_ls,
     pnp6_refine,
     pnp_l1_filter,
-    depth_weights,
     sigma2_onesided,
     triangulate,
 )

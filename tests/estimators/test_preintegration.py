@@ -1,61 +1,20 @@
 """Preintegration (spec 9.2): accuracy on an analytic trajectory, bias Jacobians, batching.
 
-``SinTraj`` (analytic trajectory with closed-form body rate and specific force) is also used by
-``test_initialization.py``.
+The analytic trajectory (closed-form body rate and specific force) is ``simulation.SinTraj``.
 """
 
 import numpy as np
 import pytest
 
 from gevi_cli.estimators import DegenerateInput, NonFiniteInput
-from gevi_cli.estimators.lie import exp_so3, log_so3, rot_x, rot_y, rot_z
+from gevi_cli.estimators.lie import exp_so3, log_so3
 from gevi_cli.estimators.preintegration import (
     imu_segment,
     preintegrate,
     preintegrate_batch,
     preintegrate_reference,
 )
-
-G_W = np.array([0.0, 0.0, -9.81])
-
-
-class SinTraj:
-    """Sinusoidal position and ZYX attitude ``R_WI = Rz(yaw) Ry(pitch) Rx(roll)`` (world z up).
-
-    Every quantity (rate, specific force, their derivatives) is in closed form.
-    """
-
-    def __init__(self, rot_amp=(0.3, 0.25, 0.6), rot_w=(1.3, 1.7, 0.9), pos_amp=(1.0, 0.8, 0.3),
-                 pos_w=(0.9, 1.1, 1.6), phase=(0.1, 0.7, 1.3)):
-        self.ra, self.rw = np.array(rot_amp, float), np.array(rot_w, float)
-        self.pa, self.pw = np.array(pos_amp, float), np.array(pos_w, float)
-        self.ph = np.array(phase, float)
-
-    def euler(self, t, d=0):
-        """(roll, pitch, yaw) and their d-th time derivative, t (n,) -> (n, 3)."""
-        arg = np.outer(t, self.rw) + self.ph
-        return self.ra * self.rw**d * np.sin(arg + d * np.pi / 2)
-
-    def R(self, t):
-        e = self.euler(np.atleast_1d(t))
-        return rot_z(e[:, 2]) @ rot_y(e[:, 1]) @ rot_x(e[:, 0])
-
-    def pos(self, t, d=0):
-        arg = np.outer(np.atleast_1d(t), self.pw) + self.ph[::-1]
-        return self.pa * self.pw**d * np.sin(arg + d * np.pi / 2)
-
-    def omega(self, t):
-        """Body rate for ZYX Euler angles: [r' - y' sp, p' cr + y' cp sr, -p' sr + y' cp cr]."""
-        t = np.atleast_1d(t)
-        r, p, _ = self.euler(t).T
-        dr, dp, dy = self.euler(t, 1).T
-        return np.column_stack([dr - dy * np.sin(p), dp * np.cos(r) + dy * np.cos(p) * np.sin(r),
-                                -dp * np.sin(r) + dy * np.cos(p) * np.cos(r)])
-
-    def specific_force(self, t):
-        """a_I = R_WI^T (p'' - g_W)."""
-        t = np.atleast_1d(t)
-        return np.einsum("nji,nj->ni", self.R(t), self.pos(t, 2) - G_W)
+from gevi_cli.estimators.simulation import G_W, SinTraj
 
 
 def _relative_truth(tr, t0, t1):

@@ -1,7 +1,12 @@
 import numpy as np
 import pytest
 
-from gevi_cli.estimators import DegenerateInput, NonFiniteInput, triangulate, triangulate_jacobian
+from gevi_cli.estimators import (
+    DegenerateInput,
+    NonFiniteInput,
+    triangulate,
+    triangulate_jacobian,
+)
 from gevi_cli.estimators import simulation as sim
 
 
