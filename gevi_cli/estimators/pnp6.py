@@ -155,24 +155,33 @@ def pnp6_refine(R, t, p, cov, q, sigma2_q=0.0, mu_rel=1e-6):
     need(n, 3)
     cov = as_covs(cov, n, 3, "cov")
     r, X = reprojection_residuals(R, t, p, q)
+    # Explicit 2x2 / 2x3 algebra instead of stacked matmuls: this runs once per frame in the
+    # pipelines, and numpy's batched matmul of tiny matrices costs more than the arithmetic.
     dpi = project_jacobian(X)  # (n, 2, 3)
-    Jh = dpi @ R
-    Sb = Jh @ cov @ np.swapaxes(Jh, 1, 2) + sigma2_q * np.eye(2)
-    det = Sb[:, 0, 0] * Sb[:, 1, 1] - Sb[:, 0, 1] * Sb[:, 1, 0]
+    Jh = dpi @ R  # (n, 2, 3): d pi / d p
+    cov9 = cov.reshape(n, 9)
+    a, b = Jh[:, 0], Jh[:, 1]
+    S00 = ((a[:, :, None] * a[:, None, :]).reshape(n, 9) * cov9).sum(1) + sigma2_q
+    S01 = ((a[:, :, None] * b[:, None, :]).reshape(n, 9) * cov9).sum(1)
+    S11 = ((b[:, :, None] * b[:, None, :]).reshape(n, 9) * cov9).sum(1) + sigma2_q
+    det = S00 * S11 - S01 * S01
     if np.any(det <= 0):
         raise DegenerateInput("pnp6_refine: singular projected covariance (zero point covariance?)")
-    W = np.empty_like(Sb)
-    W[:, 0, 0] = Sb[:, 1, 1] / det
-    W[:, 1, 1] = Sb[:, 0, 0] / det
-    W[:, 0, 1] = -Sb[:, 0, 1] / det
-    W[:, 1, 0] = -Sb[:, 1, 0] / det
-    Jp = np.empty((n, 3, 6))
-    Jp[:, :, :3] = -R @ skew(p)
-    Jp[:, :, 3:] = np.eye(3)
-    J = dpi @ Jp  # d pi / d delta, (n, 2, 6); residual r = q - pi
-    JW = np.swapaxes(J, 1, 2) @ W  # (n, 6, 2)
-    Hm = np.einsum("nij,njk->ik", JW, J)
-    g = np.einsum("nij,nj->i", JW, r)
+    W00, W01, W11 = S11 / det, -S01 / det, S00 / det
+    # d pi / d delta for R+ = R Exp(dphi), t+ = t + dt: [-Jh [p]_x | dpi]; a^T [p]_x = (a x p)^T.
+    J = np.empty((n, 2, 6))
+    px, py, pz = p[:, None, 0], p[:, None, 1], p[:, None, 2]
+    ax, ay, az = Jh[:, :, 0], Jh[:, :, 1], Jh[:, :, 2]
+    J[:, :, 0] = py * az - pz * ay  # -(Jh x p)
+    J[:, :, 1] = pz * ax - px * az
+    J[:, :, 2] = px * ay - py * ax
+    J[:, :, 3:] = dpi
+    WJ = np.empty_like(J)
+    WJ[:, 0] = W00[:, None] * J[:, 0] + W01[:, None] * J[:, 1]
+    WJ[:, 1] = W01[:, None] * J[:, 0] + W11[:, None] * J[:, 1]
+    J2, WJ2 = J.reshape(2 * n, 6), WJ.reshape(2 * n, 6)
+    Hm = WJ2.T @ J2
+    g = WJ2.T @ r.reshape(2 * n)
     Hm = Hm + mu_rel * np.max(np.diag(Hm)) * np.eye(6)
     delta = solve_checked(Hm, g, "pnp6_refine")
     return R @ exp_so3(delta[:3]), t + delta[3:]
