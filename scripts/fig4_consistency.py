@@ -77,6 +77,7 @@ def main():
     ap.add_argument("--quick", action="store_true", help="100 runs, n up to 500")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=os.path.join(os.path.dirname(__file__), "results", "fig4_consistency"))
+    ap.add_argument("--update-docs", action="store_true", help="also copy the PNG to docs/img/ (README figure)")
     a = ap.parse_args()
     runs = 100 if a.quick else a.runs
     ns = NS[:-1] if a.quick else NS
@@ -130,7 +131,7 @@ def main():
     fig.suptitle(f"GeVI Fig. 4a-b reproduction ({runs} runs per n, 2.5 px, b = 0.2 m)")
     fig.tight_layout()
     fig.savefig(os.path.join(a.out, "fig4_consistency.png"), dpi=80)
-    if not a.quick and a.runs >= 700:
+    if a.update_docs and not a.quick and a.runs >= 700:
         import shutil
 
         dst = os.path.join(os.path.dirname(__file__), "..", "docs", "img", "fig4_consistency.png")

@@ -38,7 +38,7 @@ def main():
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--n", type=int, default=200, help="points per window")
     ap.add_argument("--out", default=os.path.join(os.path.dirname(__file__), "results", "fig4_fusion"))
-    ap.add_argument("--docs-img", default=os.path.join(os.path.dirname(__file__), "..", "docs", "img", "fig4_fusion.png"))
+    ap.add_argument("--update-docs", action="store_true", help="also copy the PNG to docs/img/ (README figure)")
     a = ap.parse_args()
     dur = 30.0 if a.quick else a.duration
     os.makedirs(a.out, exist_ok=True)
@@ -96,9 +96,10 @@ def main():
     fig.tight_layout()
     png = os.path.join(a.out, "fig4_fusion.png")
     fig.savefig(png, dpi=70)
-    if not a.quick and a.docs_img:
-        shutil.copyfile(png, a.docs_img)
-        print("copied", png, "->", a.docs_img, f"({os.path.getsize(png) / 1024:.0f} kB)")
+    if a.update_docs and not a.quick:
+        docs_img = os.path.join(os.path.dirname(__file__), "..", "docs", "img", "fig4_fusion.png")
+        shutil.copyfile(png, docs_img)
+        print("copied", png, "->", docs_img, f"({os.path.getsize(png) / 1024:.0f} kB)")
     print("wrote", a.out)
 
 
