@@ -150,3 +150,15 @@ class RenderRig:
 
     def cameras(self):
         return [(self.cam0, self.T_B_C0), (self.cam1, self.T_B_C1)]
+
+    def to_stereo_rig(self):
+        """The same rig as the dataset layer's :class:`~gevi_cli.datasets.calibration.StereoRig`
+        (what the readers will return for the written sequence)."""
+        from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
+
+        def pinhole(cam: CameraModel, T_B_C: np.ndarray) -> PinholeCamera:
+            model = "radtan" if cam.has_distortion else "none"
+            return PinholeCamera(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy, model,
+                                 cam.distortion if cam.has_distortion else (), T_B_C)
+
+        return StereoRig(pinhole(self.cam0, self.T_B_C0), pinhole(self.cam1, self.T_B_C1))

@@ -19,55 +19,14 @@ from pathlib import Path
 
 import numpy as np
 
-from gevi_cli.geometry import invert_pose, matrix_to_quat_wxyz, snap
-from gevi_cli.simulate.writers import plain, write_simulation_yaml
+from gevi_cli.datasets.kalibr import write_camchain, write_imu_yaml
+from gevi_cli.geometry import matrix_to_quat_wxyz
+from gevi_cli.simulate.writers import write_simulation_yaml
 
 TOPIC_CAM = ("/cam0/image_raw", "/cam1/image_raw")
 TOPIC_IMU = "/imu0"
 TOPIC_GT = "/groundtruth/pose"
 TOPIC_MOCAP = "/mocap0/pose"
-
-
-def camchain(seq) -> dict:
-    rig = seq.rig
-    T_C0_I = invert_pose(rig.T_B_C0)
-    T_C1_I = invert_pose(rig.T_B_C1)
-    out = {}
-    for i, (cam, T) in enumerate(((rig.cam0, T_C0_I), (rig.cam1, T_C1_I))):
-        d = {
-            "T_cam_imu": T.tolist(),
-            "cam_overlaps": [1 - i],
-            "camera_model": "pinhole",
-            "distortion_coeffs": list(cam.distortion),
-            "distortion_model": "radtan",
-            "intrinsics": [cam.fx, cam.fy, cam.cx, cam.cy],
-            "resolution": [cam.width, cam.height],
-            "rostopic": TOPIC_CAM[i],
-            "timeshift_cam_imu": 0.0,
-        }
-        if i == 1:
-            d = {"T_cn_cnm1": snap(rig.T_C1_C0).tolist(), **d}
-        out[f"cam{i}"] = d
-    return out
-
-
-def imu_dict(seq) -> dict:
-    p = seq.config.imu
-    return {
-        "accelerometer_noise_density": p.acc_noise_density,
-        "accelerometer_random_walk": p.acc_random_walk,
-        "gyroscope_noise_density": p.gyro_noise_density,
-        "gyroscope_random_walk": p.gyro_random_walk,
-        "rostopic": TOPIC_IMU,
-        "update_rate": p.rate_hz,
-    }
-
-
-def _dump(path: Path, data: dict, flow_lists: bool = True) -> None:
-    import yaml
-
-    path.write_text(yaml.safe_dump(plain(data), sort_keys=False, default_flow_style=None if flow_lists else False,
-                                   width=200))
 
 
 def write_bag(seq, out: Path, progress: bool = True, workers: int | None = None, name: str | None = None) -> Path:
@@ -79,8 +38,11 @@ def write_bag(seq, out: Path, progress: bool = True, workers: int | None = None,
     out.mkdir(parents=True, exist_ok=True)
     name = name or seq.config.preset
     write_simulation_yaml(out / "simulation.yaml", seq.description("bag"))
-    _dump(out / f"{name}_camchain.yaml", camchain(seq))
-    _dump(out / f"{name}_imu.yaml", imu_dict(seq), flow_lists=False)
+    write_camchain(out / f"{name}_camchain.yaml", seq.rig.to_stereo_rig(), {"left": TOPIC_CAM[0], "right": TOPIC_CAM[1]})
+    imu = seq.config.imu
+    write_imu_yaml(out / f"{name}_imu.yaml", gyro_noise_density=imu.gyro_noise_density,
+                   gyro_random_walk=imu.gyro_random_walk, acc_noise_density=imu.acc_noise_density,
+                   acc_random_walk=imu.acc_random_walk, rostopic=TOPIC_IMU, update_rate=imu.rate_hz)
 
     ts = get_typestore(Stores.ROS1_NOETIC)
     T = ts.types
