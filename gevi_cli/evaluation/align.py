@@ -117,6 +117,31 @@ def estimate_alignment(gt: Trajectory, est: Trajectory, method: str, n_align: in
     return Alignment(method, np.asarray(R), np.asarray(t), float(s), n)
 
 
+#: Below this ratio of the second to the largest singular value of the centred aligned positions, the
+#: rotation about the direction of travel is practically undetermined by a position-only alignment.
+COLLINEAR_RATIO = 0.02
+
+
+def collinearity_warning(gt: Trajectory, method: str, n_align: int = -1) -> str | None:
+    """Warn when an se3/sim3 alignment rests on nearly collinear positions.
+
+    Umeyama uses positions only: on a straight drive (KITTI 04) the roll about the direction of
+    travel is free, so the rotation ATE reflects an arbitrary alignment roll, not the estimate.
+    posyaw is immune (only yaw about gravity is estimated), as are none/origin.
+    """
+    if method not in ("se3", "sim3"):
+        return None
+    n = len(gt) if n_align is None or n_align < 0 else min(int(n_align), len(gt))
+    g = gt.positions[:n] - gt.positions[:n].mean(axis=0)
+    s = np.linalg.svd(g, compute_uv=False)
+    if n < 3 or s[0] == 0 or s[1] / s[0] >= COLLINEAR_RATIO:
+        return None
+    return (f"the aligned ground-truth positions are nearly collinear (spread ratio {s[1] / s[0]:.3g}): "
+            f"the {method} rotation about the direction of travel is undetermined, so the rotation ATE "
+            "is not meaningful (translation ATE and RPE are); use --align origin, or posyaw for z-up "
+            "(gravity-aligned) data")
+
+
 def align(gt: Trajectory, est: Trajectory, method: str, n_align: int = -1) -> tuple[Trajectory, Alignment]:
     """Return ``(aligned estimate, alignment)``."""
     a = estimate_alignment(gt, est, method, n_align)

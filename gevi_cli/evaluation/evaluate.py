@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gevi_cli.errors import GeviError
-from gevi_cli.evaluation.align import Alignment, align
+from gevi_cli.evaluation.align import Alignment, align, collinearity_warning
 from gevi_cli.evaluation.associate import Association, associate
 from gevi_cli.evaluation.ate import AteResult, compute_ate
 from gevi_cli.evaluation.kitti_devkit import KittiResult, kitti_errors, raw_poses
@@ -145,6 +145,9 @@ def evaluate_pair(gt: Trajectory, est: Trajectory, settings: EvalSettings, align
         res.status, res.reason = "failed", f"only {assoc.n_matched} matched poses"
         return res
     aligned, alignment = align(assoc.gt, assoc.est, align_method, settings.n_align)
+    w = collinearity_warning(assoc.gt, align_method, settings.n_align)
+    if w:
+        res.warnings.append(f"{where}: {w}")
     res.alignment = alignment
     res.aligned = aligned
     res.ate = compute_ate(assoc.gt, aligned)
