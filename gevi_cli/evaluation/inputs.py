@@ -271,21 +271,17 @@ def load_groundtruth(path: Path, gt_frame: str = "body"):
         gt = seq.groundtruth
         if gt is None:
             raise GeviError(path, "the dataset has no ground truth")
-        try:
-            T = np.asarray(seq.calibration.T_B_C0, dtype=np.float64)
-        except Exception:
-            T = None
-        return gt, T
+        return gt, np.asarray(seq.calibration.T_B_C0, dtype=np.float64)
     if not path.exists():
         raise GeviError(path, "no such ground-truth file or dataset folder")
     return read_trajectory(path, name="groundtruth", frame=gt_frame), None
 
 
 def _is_dataset(path: Path) -> bool:
-    try:
-        from gevi_cli.datasets import detect_kind
+    from gevi_cli.datasets import detect_kind
 
+    try:
         detect_kind(path)
         return True
-    except Exception:
+    except GeviError:  # not a dataset layout
         return False
