@@ -17,7 +17,7 @@ import pandas as pd
 
 from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
 from gevi_cli.datasets.registry import register
-from gevi_cli.datasets.sequence import ImuData, Sequence, StereoFrame, pair_by_stamp
+from gevi_cli.datasets.sequence import ImuData, Sequence, StereoFrame, pair_stereo
 from gevi_cli.datasets.yamlio import load_yaml, matrix, require
 from gevi_cli.errors import DataError, GeviError, LayoutError
 from gevi_cli.trajectory import Trajectory, read_trajectory
@@ -137,13 +137,7 @@ class EurocSequence(Sequence):
         for cam, missing in (("cam0", missing0), ("cam1", missing1)):
             if missing:
                 self.warnings.append(f"{mav0 / cam / 'data.csv'}: {missing} row(s) have no image file; ignored")
-        i0, i1 = pair_by_stamp(t0, t1, pair_tolerance_ns)
-        for cam, n, used in (("cam0", len(t0), len(i0)), ("cam1", len(t1), len(i1))):
-            if n - used:
-                self.warnings.append(f"{mav0 / cam}: {n - used} image(s) without a partner within "
-                                     f"{pair_tolerance_ns / 1e6:g} ms in the other camera; ignored")
-        if len(i0) == 0:
-            raise DataError(mav0, "no stereo pairs: cam0 and cam1 share no timestamps")
+        i0, i1 = pair_stereo(t0, t1, pair_tolerance_ns, (str(mav0 / "cam0"), str(mav0 / "cam1")), mav0, self.warnings)
         self._stamps = t0[i0]
         self._left = f0[i0]
         self._right = f1[i1]

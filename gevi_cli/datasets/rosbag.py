@@ -29,7 +29,7 @@ IMU and ground truth: the one topic of that type; with several, the IMU named in
 a warning names the choice.
 
 Stamps are the message header stamps (never the bag receive time); left and right are paired by
-stamp within ``pair_tolerance_ns`` (:func:`~gevi_cli.datasets.sequence.pair_by_stamp`).
+stamp within ``pair_tolerance_ns`` (:func:`~gevi_cli.datasets.sequence.pair_stereo`).
 
 Images are not held in memory: opening reads the bag once, keeping for every image message only
 its header stamp and bag time (parsed from the first bytes of the serialized message), plus all
@@ -56,7 +56,7 @@ from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.datasets.euroc import DEFAULT_PAIR_TOLERANCE_NS, camera_from_sensor_yaml
 from gevi_cli.datasets.kalibr import read_camchain, read_imu_noise
 from gevi_cli.datasets.registry import register
-from gevi_cli.datasets.sequence import ImuData, Sequence, StereoFrame, pair_by_stamp
+from gevi_cli.datasets.sequence import ImuData, Sequence, StereoFrame, pair_stereo
 from gevi_cli.datasets.yamlio import load_yaml
 from gevi_cli.errors import DataError, GeviError, LayoutError
 from gevi_cli.trajectory import Trajectory, read_trajectory
@@ -479,14 +479,8 @@ class RosbagSequence(Sequence):
                                      "kept the first of each")
             sides[side] = (stamps[keep], bag_ns[keep])
         (t0, b0), (t1, b1) = sides["left"], sides["right"]
-        i0, i1 = pair_by_stamp(t0, t1, tolerance_ns)
-        for side, n, used in (("left", len(t0), len(i0)), ("right", len(t1), len(i1))):
-            if n - used:
-                self.warnings.append(f"{self.path}: {self.topics[side]}: {n - used} image(s) without a partner within "
-                                     f"{tolerance_ns / 1e6:g} ms on the other camera; ignored")
-        if len(i0) == 0:
-            raise DataError(self.path, f"no stereo pairs: {self.topics['left']} and {self.topics['right']} share no "
-                                       f"header stamps within {tolerance_ns / 1e6:g} ms")
+        names = (f"{self.path}: {self.topics['left']}", f"{self.path}: {self.topics['right']}")
+        i0, i1 = pair_stereo(t0, t1, tolerance_ns, names, self.path, self.warnings)
         self._stamps = t0[i0]
         self._left = (t0[i0], b0[i0])
         self._right = (t1[i1], b1[i1])

@@ -145,3 +145,20 @@ def pair_by_stamp(left_ns: np.ndarray, right_ns: np.ndarray, tolerance_ns: int) 
     # keep one left per right (mutual nearest): first occurrence wins
     _, first = np.unique(i_right, return_index=True)
     return i_left[first], i_right[first]
+
+
+def pair_stereo(left_ns: np.ndarray, right_ns: np.ndarray, tolerance_ns: int, names: tuple[str, str],
+                where, warnings: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`pair_by_stamp` for a reader: unpaired images are counted into ``warnings`` (per camera
+    ``names``), and no pair at all is a :class:`~gevi_cli.errors.DataError` at ``where``."""
+    from gevi_cli.errors import DataError
+
+    i0, i1 = pair_by_stamp(left_ns, right_ns, tolerance_ns)
+    for name, n, used in ((names[0], len(left_ns), len(i0)), (names[1], len(right_ns), len(i1))):
+        if n - used:
+            warnings.append(f"{name}: {n - used} image(s) without a partner within "
+                            f"{tolerance_ns / 1e6:g} ms in the other camera; ignored")
+    if len(i0) == 0:
+        raise DataError(where, f"no stereo pairs: {names[0]} and {names[1]} share no stamps within "
+                               f"{tolerance_ns / 1e6:g} ms")
+    return i0, i1
