@@ -73,3 +73,11 @@ def solve_checked(M: np.ndarray, rhs: np.ndarray, what: str, rcond: float = 1e-1
     if not np.all(np.isfinite(x)):
         raise DegenerateInput(f"{what}: non-finite solution")
     return x
+
+
+def stereo_inputs(z, y, R_rl, t_rl):
+    """Validated keyframe stereo observations: ``(z, y, R_rl, t_rl)`` with z, y (n, 2), n >= 1."""
+    z = as_points(z, 2, "z")
+    y = as_points(y, 2, "y")
+    need(same_length(z, y), 1)
+    return z, y, as_matrix(R_rl, (3, 3), "R_rl"), as_matrix(t_rl, (3,), "t_rl")

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from ._checks import as_matrix, as_points, need, same_length
+from ._checks import as_points, need, same_length, stereo_inputs
 from .errors import DegenerateInput
 from .lie import homogeneous, skew
 
@@ -79,12 +79,7 @@ def sigma2_stereo(z, y, R_rl, t_rl) -> float:
     sigma^2 = sum r_i^2 / sum(||E12 E z_i||^2 + ||E12 E^T y_i||^2), r_i = y_i^T E z_i.
     Assumes the stereo matches are outlier-free.
     """
-    z = as_points(z, 2, "z")
-    y = as_points(y, 2, "y")
-    n = same_length(z, y)
-    need(n, 1)
-    R_rl = as_matrix(R_rl, (3, 3), "R_rl")
-    t_rl = as_matrix(t_rl, (3,), "t_rl")
+    z, y, R_rl, t_rl = stereo_inputs(z, y, R_rl, t_rl)
     E = skew(t_rl) @ R_rl
     zh, yh = homogeneous(z), homogeneous(y)
     Ez = zh @ E.T

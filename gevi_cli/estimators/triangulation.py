@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._checks import as_matrix, as_points, finite_scalar, need, same_length
+from ._checks import (
+    finite_scalar,
+    stereo_inputs,
+)
 from .errors import DegenerateInput
 from .lie import homogeneous, skew
 
@@ -35,12 +38,8 @@ def triangulate_jacobian(z, y, R_rl, t_rl):
     Raises DegenerateInput for (near-)zero-parallax points (the normal matrix is singular);
     gate by disparity before calling.
     """
-    z = as_points(z, 2, "z")
-    y = as_points(y, 2, "y")
-    n = same_length(z, y)
-    need(n, 1)
-    R_rl = as_matrix(R_rl, (3, 3), "R_rl")
-    t_rl = as_matrix(t_rl, (3,), "t_rl")
+    z, y, R_rl, t_rl = stereo_inputs(z, y, R_rl, t_rl)
+    n = len(z)
     A, b = _system(z, y, R_rl, t_rl)
     At = np.swapaxes(A, 1, 2)
     N = At @ A  # (n, 3, 3)
