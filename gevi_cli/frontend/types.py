@@ -1,0 +1,89 @@
+"""Typed values that flow from a front end to an odometry back end.
+
+Pixels are in the **rectified** left/right images of the rig (see :class:`RectifiedStereo`);
+feature ids are int64 and persistent: the same physical feature keeps its id from the keyframe where
+it was detected to the last frame that tracks it, so a back end matches current observations to the
+keyframe by id, whatever produced them (our LK front end or an exported track file).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class RectifiedStereo:
+    """The rig as the pipelines see it: a rectified pinhole pair with the right camera at +b on x.
+
+    ``fx, fy, cx, cy`` in pixels (shared by both rectified images), ``baseline`` in metres,
+    ``T_B_C0`` (4x4) maps *rectified* cam0 coordinates into the body frame.  In spec notation the
+    stereo extrinsic is ``X_R = R_rl X_L + t_rl`` with ``R_rl = I`` and ``t_rl = (-b, 0, 0)``.
+    """
+
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    baseline: float
+    T_B_C0: np.ndarray = field(default_factory=lambda: np.eye(4), compare=False)
+
+    @property
+    def K(self) -> np.ndarray:
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def f(self) -> float:
+        """Focal length for converting pixel noise to normalized noise (spec 1: sqrt(fx fy))."""
+        return float(np.sqrt(self.fx * self.fy))
+
+    @property
+    def R_rl(self) -> np.ndarray:
+        return np.eye(3)
+
+    @property
+    def t_rl(self) -> np.ndarray:
+        return np.array([-self.baseline, 0.0, 0.0])
+
+    def normalize(self, uv: np.ndarray) -> np.ndarray:
+        """Pixels (n, 2) -> normalized image coordinates (n, 2)."""
+        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+        return np.column_stack([(uv[:, 0] - self.cx) / self.fx, (uv[:, 1] - self.cy) / self.fy])
+
+    def depth_from_disparity(self, disparity_px: np.ndarray) -> np.ndarray:
+        d = np.asarray(disparity_px, dtype=np.float64)
+        with np.errstate(divide="ignore"):
+            return np.where(d > 0, self.fx * self.baseline / np.where(d > 0, d, 1.0), np.inf)
+
+
+@dataclass(frozen=True)
+class FeatureObs:
+    """Features observed in one (rectified, left) image: ``ids`` (n,) int64, ``uv`` (n, 2) pixels."""
+
+    ids: np.ndarray
+    uv: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    @staticmethod
+    def empty() -> "FeatureObs":
+        return FeatureObs(np.empty(0, dtype=np.int64), np.empty((0, 2)))
+
+
+@dataclass(frozen=True)
+class StereoObs:
+    """Keyframe stereo matches: ``ids`` (n,), ``uv_left``/``uv_right`` (n, 2) rectified pixels."""
+
+    ids: np.ndarray
+    uv_left: np.ndarray
+    uv_right: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    @property
+    def disparity(self) -> np.ndarray:
+        return self.uv_left[:, 0] - self.uv_right[:, 0]
