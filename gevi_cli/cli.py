@@ -20,6 +20,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "convert": ("gevi_cli.commands.convert", "Convert a trajectory file between TUM, EuRoC csv and KITTI formats."),
     "eval": ("gevi_cli.commands.eval", "ATE/RPE/KITTI tables and plots of estimates against ground truth."),
     "simulate": ("gevi_cli.commands.simulate", "Render a synthetic stereo-IMU sequence with exact ground truth."),
+    "run": ("gevi_cli.commands.run", "Run odometry (CurrentFeature) on a sequence and evaluate it."),
 }
 
 EPILOG = """\b
@@ -29,6 +30,7 @@ Examples:
   gevi convert estimate.csv estimate.tum --to tum
   gevi simulate --sample
   gevi eval --gt groundtruth.csv -e ours=traj.tum -e orbslam3=f_dataset.txt
+  gevi run ../shared/data/kitti06_head/dataset/sequences/06 --method cfo
 """
 
 

@@ -5,7 +5,7 @@ import click
 
 sequence_options = [
     click.option("--kind", default=None, help="Force the dataset kind (euroc, pool, kitti, rosbag); default: detect."),
-    click.option("--groundtruth", "groundtruth", type=click.Path(dir_okay=False), default=None,
+    click.option("--gt", "--groundtruth", "groundtruth", type=click.Path(dir_okay=False), default=None,
                  help="Ground-truth trajectory file overriding the dataset's own (any format gevi reads)."),
     click.option("--calib", default=None, type=click.Path(), help="Bags: Kalibr camchain YAML or EuRoC mav0 folder."),
     click.option("--imu-calib", "imu_calib", default=None, type=click.Path(dir_okay=False),
@@ -30,7 +30,7 @@ def sequence_kwargs(groundtruth=None, calib=None, topics=None, cameras=None, imu
         import pathlib
 
         if not pathlib.Path(groundtruth).is_file():
-            raise GeviError("--groundtruth", f"{groundtruth}: no such file")
+            raise GeviError("--gt", f"{groundtruth}: no such file")
         options["groundtruth"] = groundtruth
     if calib is not None:
         options["calib"] = calib

@@ -9,11 +9,12 @@ returned pose ``(R, t)`` maps keyframe-left into current-left: ``X_C = R p + t``
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from ._checks import as_covs, as_matrix, as_points, need, same_length, solve_checked
-from .errors import DegenerateInput, ShapeError
+from .errors import DegenerateInput, NonFiniteInput, ShapeError
 from .lie import exp_so3, project, project_jacobian, project_to_so3
 
 MIN_POINTS = 6  # 11 unknowns, two rows per point
@@ -206,13 +207,239 @@ def pnp6_l1(p, q):
     return recover_pose(res.x[:11], pbar)
 
 
-def pnp_l1_filter(p, q, drop=0.10):
+@dataclass(frozen=True)
+class L1Fit:
+    """Result of :func:`l1_regression`: ``theta`` minimises ``||A theta - b||_1``.
+
+    ``objective`` is ``||A theta - b||_1``; ``irls_iters`` the IRLS iterations run; ``pivots`` the
+    vertex-descent (simplex) steps of the polish; ``certified`` is True when the polish ended at a
+    vertex whose optimality certificate holds (so ``theta`` is an exact l1 minimiser, up to
+    rounding), False when the polish was off, hit ``max_pivots`` or stopped at a degenerate vertex.
+    """
+
+    theta: np.ndarray
+    objective: float
+    irls_iters: int
+    pivots: int
+    certified: bool
+
+
+def _independent_rows(A, order, k):
+    """The first ``k`` rows of ``A`` in ``order`` that are linearly independent (greedy, Gram-Schmidt);
+    None if fewer than ``k`` exist. Usually the first ``k`` rows already are, so this is ~k steps."""
+    Q = np.zeros((k, A.shape[1]))
+    rows = []
+    for i in order:
+        h = A[i]
+        v = h - (Q[: len(rows)] @ h) @ Q[: len(rows)]
+        nv = np.linalg.norm(v)
+        if nv > 1e-9 * np.linalg.norm(h):
+            Q[len(rows)] = v / nv
+            rows.append(i)
+            if len(rows) == k:
+                return np.array(rows)
+    return None
+
+
+def _vertex_polish(A, b, B, max_pivots):
+    """Vertex descent (the simplex method for l1 regression) from the vertex of the basis ``B``.
+
+    A vertex is theta = A_B^-1 b_B: the k rows of B have zero residual. With s_N = sign(r_N) on
+    the other rows and g = A_B^-T A_N^T s_N, the vertex is optimal if max|g| <= 1: u = s_N on N,
+    u = -g on B satisfies A^T u = 0, |u| <= 1 and u_i = sign(r_i) wherever r_i != 0, the
+    first-order condition of min ||A theta - b||_1 (sufficient: the problem is convex).
+    Otherwise the row j with the largest |g_j| is released in the direction s = -sign(g_j)
+    (delta = s A_B^-1 e_j; the cost's slope along it is 1 - |g_j| < 0) and the cost is minimised
+    exactly along delta: it is convex piecewise linear in the step, its minimiser is the
+    breakpoint where the slope turns non-negative (a weighted median), and that row enters B.
+    At a non-degenerate vertex every step lowers the cost, so the descent cannot cycle.
+
+    At a degenerate vertex (rows of N at zero residual, e.g. noise-free or duplicated rows) those
+    rows add sum |a_i| to the slope, so a release may not descend; the other rows with |g_j| > 1
+    are tried, and if none descends the status is "degenerate" (no certificate from this test).
+    Returns (B, pivots, status), status "optimal", "degenerate", "max_pivots" or "singular".
+    """
+    m, k = A.shape
+    B = B.copy()
+    in_b = np.zeros(m, dtype=bool)
+    in_b[B] = True
+    absA, absb = np.abs(A), np.abs(b)
+    for pivot in range(max_pivots + 1):
+        try:
+            Binv = np.linalg.inv(A[B])
+        except np.linalg.LinAlgError:
+            return B, pivot, "singular"
+        theta = Binv @ b[B]
+        r = A @ theta - b
+        r[in_b] = 0.0
+        # residuals at the rounding level of A theta - b count as exact zeros (noise-free rows)
+        nz = np.abs(r) > 1e-12 * (absA @ np.abs(theta) + absb)
+        sg = np.where(nz, np.sign(r), 0.0)
+        g = Binv.T @ (A.T @ sg)
+        if not np.all(np.isfinite(g)):
+            return B, pivot, "singular"
+        if np.max(np.abs(g)) <= 1.0 + 1e-9:
+            return B, pivot, "optimal"
+        if pivot == max_pivots:
+            return B, pivot, "max_pivots"
+        zero_n = ~nz & ~in_b
+        for j in np.argsort(-np.abs(g), kind="stable"):
+            if abs(g[j]) <= 1.0 + 1e-9:
+                return B, pivot, "degenerate"
+            s = -math.copysign(1.0, g[j])
+            delta = s * Binv[:, j]
+            a = A @ delta
+            a[in_b] = 0.0
+            # slope at step 0+: the released row gives |s| = 1, the rows of N with r_i != 0
+            # give sign(r_i) a_i (summing to s g_j = -|g_j|), those with r_i = 0 give |a_i|
+            slope = 1.0 - abs(g[j]) + np.abs(a[zero_n]).sum()
+            if slope < -1e-12:
+                break
+        else:
+            return B, pivot, "degenerate"
+        cand = np.flatnonzero(nz & (r * a < 0))  # rows whose residual reaches zero for a step > 0
+        if cand.size == 0:  # the cost would fall without bound: impossible unless A is singular
+            return B, pivot, "singular"
+        step = -r[cand] / a[cand]
+        o = np.argsort(step, kind="stable")
+        kk = int(np.searchsorted(slope + 2.0 * np.cumsum(np.abs(a[cand[o]])), 0.0))
+        i_new = cand[o[min(kk, o.size - 1)]]
+        in_b[B[j]] = False
+        in_b[i_new] = True
+        B[j] = i_new
+    return B, max_pivots, "max_pivots"  # not reached
+
+
+def _certified_by_perturbation(A, b, b_pert, B):
+    """Optimality certificate of the vertex A_B^-1 b_B for ||A theta - b||_1 from the signs of the
+    perturbed problem (whose vertex of the same basis is non-degenerate and optimal): u = sign of
+    the perturbed residuals on N, -A_B^-T A_N^T u on B is a valid multiplier for the original
+    problem if it is bounded by 1 and agrees in sign with every non-zero original residual."""
+    Binv = np.linalg.inv(A[B])
+    in_b = np.zeros(len(b), dtype=bool)
+    in_b[B] = True
+    theta = Binv @ b[B]
+    r = A @ theta - b
+    r_p = A @ (Binv @ b_pert[B]) - b_pert
+    u = np.where(in_b, 0.0, np.sign(r_p))
+    nz = ~in_b & (np.abs(r) > 1e-12 * (np.abs(A) @ np.abs(theta) + np.abs(b)))
+    if np.any(u[nz] != np.sign(r[nz])) or np.any(u[~in_b] == 0):
+        return False
+    return bool(np.max(np.abs(Binv.T @ (A.T @ u))) <= 1.0 + 1e-9)
+
+
+def l1_regression(A, b, iters=20, eps=1e-6, polish=True, max_pivots=200):
+    """Minimise ``||A theta - b||_1`` for a full-column-rank ``A`` (m, k) by IRLS + vertex polish.
+
+    1. Columns are equilibrated (the l1 cost is invariant to column scaling; the solves are not).
+    2. Start from least squares (the same conditioning test as :func:`pnp6_ls`: DegenerateInput
+       if rank deficient), then ``iters`` IRLS steps: weighted LS with w_i = 1/max(|r_i|, eps).
+       This is the majorise-minimise iteration of the Huber(eps) cost, which is within m eps / 2
+       of the l1 cost, so each step decreases it; but it converges only linearly near the kink,
+       and the digits it misses reorder the residuals at the 10 % boundary of the pre-filter
+       (KITTI 04 gray: the keep-mask of plain IRLS agrees with the LP's on 98.3 % of the points
+       after 10 steps, 99.7 % after 80, and single frames still differ on 4-5 % of their points).
+       So IRLS is only the warm start of
+    3. ``polish``: exact vertex descent (:func:`_vertex_polish`, the simplex method for l1
+       regression) from the vertex through the k smallest IRLS residuals (the first k linearly
+       independent ones), ending with an optimality certificate. On KITTI 04 (gray + colour,
+       540 frames) every frame ends certified, after at most 15 pivots from 20 IRLS steps
+       (46 from plain LS), with a cost at or below HiGHS' (which stops at its 1e-7 feasibility
+       tolerance). The warm start only saves pivots: 20 IRLS steps cost about as much as 4.
+       If the descent stops at a degenerate vertex (more than k zero residuals: noise-free or
+       duplicated rows), it is continued once on ``b`` perturbed by ~1e-7 of each row's scale
+       (the classic perturbation cure for simplex degeneracy); the final basis is then re-solved
+       with the true ``b`` and certified with the perturbed problem's signs.
+
+    ``eps`` is in the units of ``b`` (for PnP normalized image coordinates: 1e-6 is ~1e-3 px at
+    f = 700); it bounds the IRLS weights so the weighted system stays well conditioned. Without
+    a certificate (``polish=False``, ``max_pivots`` reached) the better of the IRLS and the
+    polished solution is returned with ``certified=False``.
+    """
+    A = np.asarray(A, dtype=float)
+    b = np.asarray(b, dtype=float)
+    if A.ndim != 2 or b.shape != (A.shape[0],) or A.shape[0] < A.shape[1]:
+        raise ShapeError(f"l1_regression: need A (m, k) with m >= k and b (m,), got {A.shape}, {b.shape}")
+    if not (np.all(np.isfinite(A)) and np.all(np.isfinite(b))):
+        raise NonFiniteInput("l1_regression: non-finite input")
+    m, k = A.shape
+    cs = np.sqrt(np.einsum("ij,ij->j", A, A))
+    if np.any(cs == 0) or not np.all(np.isfinite(cs)):
+        raise DegenerateInput("l1_regression: zero column")
+    As = A / cs
+    theta = solve_checked(As.T @ As, As.T @ b, "l1_regression")
+    done = 0
+    for it in range(iters):
+        r = As @ theta - b
+        Aw = As * (1.0 / np.maximum(np.abs(r), eps))[:, None]
+        try:
+            new = np.linalg.solve(Aw.T @ As, Aw.T @ b)
+        except np.linalg.LinAlgError:
+            break
+        if not np.all(np.isfinite(new)):
+            break
+        theta, done = new, it + 1
+    cost = float(np.abs(As @ theta - b).sum())
+    if not polish:
+        return L1Fit(theta / cs, cost, done, 0, False)
+    B = _independent_rows(As, np.argsort(np.abs(As @ theta - b), kind="stable"), k)
+    if B is None:
+        return L1Fit(theta / cs, cost, done, 0, False)
+    B, pivots, status = _vertex_polish(As, b, B, max_pivots)
+    certified = status == "optimal"
+    if status == "degenerate":
+        theta_b = np.linalg.solve(As[B], b[B])
+        scale = np.abs(As) @ np.abs(theta_b) + np.abs(b)
+        b_pert = b + 1e-7 * scale * np.random.default_rng(20250805).uniform(-1.0, 1.0, m)
+        B_p, more, status = _vertex_polish(As, b_pert, B, max_pivots - pivots)
+        pivots += more
+        if status != "singular":
+            B = B_p
+        if status == "optimal":
+            certified = _certified_by_perturbation(As, b, b_pert, B)
+    try:
+        theta_v = np.linalg.solve(As[B], b[B])
+    except np.linalg.LinAlgError:
+        return L1Fit(theta / cs, cost, done, pivots, False)
+    cost_v = float(np.abs(As @ theta_v - b).sum())
+    if certified or cost_v <= cost:
+        theta, cost = theta_v, cost_v
+    return L1Fit(theta / cs, cost, done, pivots, certified)
+
+
+def pnp6_l1_irls(p, q, iters=20, eps=1e-6, polish=True):
+    """l1-norm linear PnP (spec 5.5) without an LP solver -> (R, t); same model as :func:`pnp6_l1`.
+
+    Minimises ``||H theta - d||_1`` on the 11-parameter CPnP model with :func:`l1_regression`:
+    vectorised IRLS warm-started from LS (``iters`` steps, weights 1/max(|r|, ``eps``)), then an
+    exact vertex-descent polish with an optimality certificate, so the result is the LP's
+    minimiser (not an approximation of it) whenever that is unique; the pose is recovered as in
+    spec 5.3 (:func:`recover_pose`). About 20x faster than HiGHS at n = 200 (scripts/bench_l1.py).
+    ``polish=False`` gives plain IRLS (approximate). Raises the same EstimatorError subclasses as
+    :func:`pnp6_l1` (TooFewPoints, ShapeError, NonFiniteInput; DegenerateInput for a singular
+    system or kappa <= 0).
+    """
+    H, d, pbar = build_H(p, q)
+    fit = l1_regression(H, d, iters=iters, eps=eps, polish=polish)
+    return recover_pose(fit.theta, pbar)
+
+
+L1_METHODS = {"lp": pnp6_l1, "irls": pnp6_l1_irls}
+
+
+def pnp_l1_filter(p, q, drop=0.10, method="lp"):
     """l1-PnP pre-filter (spec 5.5): boolean keep-mask dropping the ceil(drop*n) largest
-    reprojection errors of the l1 pose (points behind the camera count as infinite error)."""
+    reprojection errors of the l1 pose (points behind the camera count as infinite error).
+
+    ``method``: "lp" (:func:`pnp6_l1`, HiGHS, the reference) or "irls" (:func:`pnp6_l1_irls`,
+    the same minimiser without an LP, ~20x faster). Ties in the error are broken by index.
+    """
+    if method not in L1_METHODS:
+        raise ValueError(f"pnp_l1_filter: method must be one of {sorted(L1_METHODS)}, got {method!r}")
     p = as_points(p, 3, "p")
     q = as_points(q, 2, "q")
     n = same_length(p, q)
-    R, t = pnp6_l1(p, q)
+    R, t = L1_METHODS[method](p, q)
     X = p @ R.T + t
     err = np.full(n, np.inf)
     front = X[:, 2] > 0

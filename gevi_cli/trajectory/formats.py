@@ -188,28 +188,43 @@ def _nearest_rotations(R: np.ndarray) -> np.ndarray:
 def write_trajectory(traj: Trajectory, path: str | Path, fmt: str) -> Path:
     """Write ``traj`` as ``fmt`` (one of :data:`WRITE_FORMATS`); stamps are written exactly."""
     path = Path(path)
+    check_write_format(fmt)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    header = format_header(fmt)
+    path.write_text("\n".join(([header] if header else []) + format_rows(traj, fmt)) + "\n")
+    return path
+
+
+def check_write_format(fmt: str) -> None:
     if fmt not in WRITE_FORMATS:
         raise GeviError("--to", f"unknown trajectory format {fmt!r}; choose one of {', '.join(WRITE_FORMATS)}")
-    path.parent.mkdir(parents=True, exist_ok=True)
+
+
+def format_header(fmt: str) -> str | None:
+    """The comment line a file of ``fmt`` starts with (None for the KITTI formats)."""
+    if fmt == "tum":
+        return "# timestamp tx ty tz qx qy qz qw"
+    if fmt == "euroc":
+        return "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []"
+    return None
+
+
+def format_rows(traj: Trajectory, fmt: str) -> list[str]:
+    """The text rows of ``traj`` in ``fmt`` (no header): what :func:`write_trajectory` writes, and what
+    a run streams to disk pose by pose."""
     p, q = traj.positions, traj.quat_wxyz
     if fmt == "tum":
         stamps = ns_to_seconds_strings(traj.t_ns)
         body = np.column_stack([p, q[:, 1:], q[:, :1]])
-        lines = ["# timestamp tx ty tz qx qy qz qw"]
-        lines += [s + " " + " ".join(f"{v:.9f}" for v in row) for s, row in zip(stamps, body.tolist())]
-    elif fmt == "euroc":
+        return [s + " " + " ".join(f"{v:.9f}" for v in row) for s, row in zip(stamps, body.tolist())]
+    if fmt == "euroc":
         body = np.column_stack([p, q])
-        lines = ["#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []"]
-        lines += [f"{t}," + ",".join(f"{v:.9f}" for v in row) for t, row in zip(traj.t_ns.tolist(), body.tolist())]
-    else:
-        M = traj.matrices[:, :3, :].reshape(-1, 12)
-        if fmt == "kitti":
-            lines = [" ".join(f"{v:.9e}" for v in row) for row in M.tolist()]
-        else:
-            index = _frame_indices(traj)
-            lines = [f"{i} " + " ".join(f"{v:.9e}" for v in row) for i, row in zip(index.tolist(), M.tolist())]
-    path.write_text("\n".join(lines) + "\n")
-    return path
+        return [f"{t}," + ",".join(f"{v:.9f}" for v in row) for t, row in zip(traj.t_ns.tolist(), body.tolist())]
+    M = traj.matrices[:, :3, :].reshape(-1, 12)
+    if fmt == "kitti":
+        return [" ".join(f"{v:.9e}" for v in row) for row in M.tolist()]
+    index = _frame_indices(traj)
+    return [f"{i} " + " ".join(f"{v:.9e}" for v in row) for i, row in zip(index.tolist(), M.tolist())]
 
 
 def _frame_indices(traj: Trajectory) -> np.ndarray:

@@ -149,7 +149,7 @@ def test_bad_inputs_one_line(euroc_micro, tmp_path, capsys):
     code, _, err = run_cli(["info", tmp_path / "nope"], capsys)
     assert code == 2 and "nope: no such file or folder" in err
     code, _, err = run_cli(["info", euroc_micro, "--groundtruth", tmp_path / "gt.csv"], capsys)
-    assert code == 2 and "--groundtruth" in err
+    assert code == 2 and "--gt" in err
     with pytest.raises(GeviError):
         open_sequence(euroc_micro, kind="nonsense")
 

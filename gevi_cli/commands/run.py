@@ -1,0 +1,65 @@
+"""`gevi run SEQUENCE`: odometry from images (or exported tracks) to a trajectory, evaluated."""
+from __future__ import annotations
+
+import os
+
+# Determinism and fair timing: one BLAS/OpenMP thread (set before numpy is imported).
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import click  # noqa: E402
+
+from gevi_cli.commands.options import add_sequence_options  # noqa: E402
+
+METHODS = ("cfo",)
+
+
+@click.command("run")
+@click.argument("sequence", type=click.Path(), required=False)
+@click.option("--method", type=click.Choice(METHODS), default="cfo", show_default=True,
+              help="cfo: CurrentFeature Odometry (stereo).")
+@click.option("--start", type=click.IntRange(min=0), default=0, help="First frame (index).")
+@click.option("--max-frames", type=click.IntRange(min=1), default=None, help="Number of frames to run.")
+@click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
+              help="YAML overriding the defaults (after configs/<kind>.yaml).")
+@click.option("--set", "sets", multiple=True, metavar="STAGE.KEY=VALUE", help="Override one key (repeatable).")
+@click.option("--pnp", type=click.Choice(["be-w", "be", "ls", "epnp", "sqpnp"]), default=None,
+              help="Pose estimator (ablations; = --set pnp.method=...).")
+@click.option("--no-ba", is_flag=True, help="No epipolar local BA (= --set ba.enabled=false).")
+@click.option("--seed", type=int, default=None, help="RANSAC seed (= --set run.seed=...).")
+@click.option("-o", "--out", default=None, type=click.Path(file_okay=False),
+              help="Run folder (default results/<method>/<sequence>/<timestamp>/).")
+@click.option("--results-root", default="results", show_default=True, type=click.Path(file_okay=False),
+              help="Root of the default run folders.")
+@click.option("--plots", is_flag=True, help="Also write the evaluation plots.")
+@click.option("--dump-config", is_flag=True, help="Print every --set key with its effective value and exit.")
+@click.option("-q", "--quiet", is_flag=True, help="No progress bar; only the result lines.")
+@add_sequence_options
+def command(sequence, method, start, max_frames, config_file, sets, pnp, no_ba, seed, out, results_root, plots,
+            dump_config, quiet, kind, groundtruth, calib, imu_calib, topics, cameras):
+    """Run odometry on SEQUENCE and evaluate it against its ground truth.
+
+    SEQUENCE is a dataset folder or bag (EuRoC, pool, KITTI, rosbag, `gevi simulate` output) or an
+    OV2SLAM track export (with --calib calib.txt; the front end is then the export's).
+
+    \b
+    Examples:
+      gevi run ../shared/data/kitti06_head/dataset/sequences/06
+      gevi run ../shared/data/euroc_micro --gt ../shared/data/euroc_micro/groundtruth/V1_01_easy.csv
+      gevi run EXPORT/ov2slam_data_kitti_04_gray --calib EXPORT/../calib/gray_calib.txt --gt 04.txt
+      gevi run SEQ --pnp epnp --no-ba --set keyframe.max_mean_disp_px=20
+    """
+    from gevi_cli.run.session import RunRequest, execute
+
+    req = RunRequest(sequence=sequence, method=method, start=start, max_frames=max_frames, config_file=config_file,
+                     sets=tuple(sets), pnp=pnp, no_ba=no_ba, seed=seed, out=out, results_root=results_root,
+                     plots=plots, quiet=quiet, kind=kind, groundtruth=groundtruth, calib=calib, imu_calib=imu_calib,
+                     topics=topics, cameras=cameras)
+    if dump_config:
+        from gevi_cli.run.session import dump_config as dump
+
+        click.echo(dump(req))
+        return
+    code = execute(req, echo=click.echo)
+    if code:
+        raise click.exceptions.Exit(code)

@@ -1,0 +1,54 @@
+"""Settings of the image front end (:class:`~gevi_cli.frontend.image_frontend.ImageFrontEnd`).
+
+The defaults are the product defaults.  Pixels are pixels of the *rectified* images, depths metres.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass
+class FrontendConfig:
+    """Detection, tracking and stereo-matching parameters (units in each field's docstring)."""
+
+    cell_px: int = 32
+    """Grid cell side (px): at most one corner per cell, so features spread over the whole image."""
+
+    quality: float = 0.01
+    """Shi-Tomasi quality level: a corner needs a minimum eigenvalue >= quality * the image's best."""
+
+    min_distance_px: float = 8
+    """Minimum distance (px) between a new corner and any other corner, new or tracked."""
+
+    lk_window: int = 21
+    """Lucas-Kanade window side (px, odd), at every pyramid level."""
+
+    lk_levels: int = 3
+    """Pyramid levels above the base image (OpenCV ``maxLevel``): 3 -> images down to 1/8 size."""
+
+    lk_iters: int = 30
+    """Maximum Lucas-Kanade iterations per pyramid level."""
+
+    lk_eps: float = 0.01
+    """Lucas-Kanade convergence: stop when the update is below this (px, at the level's scale)."""
+
+    fb_max_px: float = 0.5
+    """Forward-backward check: tracking back must land within this distance (px) of the start."""
+
+    stereo_row_max_px: float = 1.5
+    """Rectified stereo: a match must lie within this many pixels of the left feature's row."""
+
+    min_depth_m: float = 0.5
+    """Nearest accepted stereo depth (m): disparity <= fx * baseline / min_depth_m."""
+
+    max_depth_m: float = 100.0
+    """Farthest accepted stereo depth (m): disparity >= fx * baseline / max_depth_m."""
+
+    border_px: int = 8
+    """No corner is detected closer than this to the image edge (px)."""
+
+    def __post_init__(self):
+        if self.cell_px < 1 or self.lk_window < 3 or self.lk_levels < 0 or self.lk_iters < 1:
+            raise ValueError(f"invalid front-end config: {self}")
+        if not 0.0 < self.min_depth_m < self.max_depth_m:
+            raise ValueError(f"need 0 < min_depth_m < max_depth_m, got {self.min_depth_m}, {self.max_depth_m}")

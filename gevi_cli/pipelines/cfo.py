@@ -1,0 +1,34 @@
+"""CurrentFeature Odometry (stereo only; "Bias-Eliminated PnP for Stereo Visual Odometry").
+
+Per frame (spec 2): LK tracks -> 5-point RANSAC -> l1-PnP drop of the worst 10 % -> noise variance
+-> Bias-Eli-W PnP (bias-eliminated linear step + one weighted LM step) against the points of the
+current keyframe only; at each new keyframe the epipolar local BA.  Everything but the two pipeline
+choices (verification, pose) lives in :class:`~gevi_cli.pipelines.odometry.KeyframeOdometry`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from gevi_cli.frontend import FrontEnd
+from gevi_cli.pipelines.config import OdometryConfig
+from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches, _make_T
+from gevi_cli.pipelines.pose6 import estimate_pose6, reprojection_median_px
+from gevi_cli.pipelines.verification import FivePointL1Verification, TrackingFailure
+
+
+class CurrentFeatureOdometry(KeyframeOdometry):
+    name = "cfo"
+
+    def __init__(self, frontend: FrontEnd, cfg: OdometryConfig):
+        super().__init__(frontend, cfg)
+        self.verification = FivePointL1Verification(cfg.verify, self.camera)
+
+    def estimate_T_ck(self, m: Matches, frame) -> np.ndarray:
+        cov = m.cov_unit * self.sigma2
+        R, t = estimate_pose6(m.p, cov, m.q, self.cfg.pnp, self.sigma2)
+        if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+            raise TrackingFailure("non-finite pose")
+        med = reprojection_median_px(R, t, m.p, m.q, self.camera.f)
+        if med > self.cfg.pnp.max_median_px:
+            raise TrackingFailure(f"median reprojection error {med:.2f} px after the pose step")
+        return _make_T(R, t)

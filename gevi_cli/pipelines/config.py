@@ -1,0 +1,116 @@
+"""Per-stage configuration of the odometry pipelines (defaults are the product; see gevi_cli.config).
+
+Units: pixels (px) in the rectified images, metres (m), seconds (s).  ``gevi run --dump-config``
+lists every key with its default; ``configs/<kind>.yaml`` overrides them per dataset kind.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from gevi_cli.config import opt
+from gevi_cli.frontend.config import FrontendConfig
+
+PNP_METHODS = ("be-w", "be", "ls", "epnp", "sqpnp")
+RANSAC_METHODS = ("5pt", "none")
+L1_METHODS = ("lp", "irls", "none")
+NOISE_METHODS = ("symmetric", "onesided", "stereo")
+
+
+@dataclass
+class VerifyConfig:
+    """Two-stage verification of keyframe<->current matches (spec 12.1 / 5.5)."""
+
+    ransac: str = opt("5pt", "first stage: '5pt' (OpenCV 5-point essential-matrix RANSAC) or 'none'")
+    ransac_threshold_px: float = opt(1.0, "RANSAC inlier threshold (Sampson distance, px)")
+    ransac_prob: float = opt(0.999, "RANSAC confidence")
+    min_parallax_px: float = opt(0.5, "below this median KF->current displacement the essential matrix "
+                                      "is undefined (no translation): the 5-point stage is skipped")
+    l1: str = opt("lp", "second stage: l1-PnP drop of the worst fraction: 'lp' (HiGHS), 'irls', 'none'")
+    l1_drop: float = opt(0.10, "fraction of largest l1-PnP reprojection errors dropped")
+    use_export_flags: bool = opt(False, "track exports only: drop the exporter's own outlier flags first")
+
+
+@dataclass
+class TriangulationConfig:
+    """Keyframe stereo triangulation with covariance (spec 4)."""
+
+    min_depth_m: float = opt(0.5, "points nearer than this are not used (m)")
+    max_depth_m: float = opt(100.0, "points farther than this are not used (m)")
+    min_points: int = opt(20, "a keyframe with fewer triangulated points cannot be tracked against")
+
+
+@dataclass
+class NoiseConfig:
+    """Image-noise variance from the data (spec 3)."""
+
+    method: str = opt("symmetric", "'symmetric' (GEP with both views noisy), 'onesided' (paper model), "
+                                   "'stereo' (keyframe stereo epipolar residuals)")
+    min_px: float = opt(0.05, "clamp of the estimated std (px): below, the estimate is degenerate")
+    max_px: float = opt(5.0, "clamp of the estimated std (px)")
+    default_px: float = opt(0.5, "std used until a first valid estimate exists (px)")
+
+
+@dataclass
+class PnPConfig:
+    """Keyframe -> current pose (spec 5)."""
+
+    method: str = opt("be-w", "'be-w' (Bias-Eli + weighted LM step), 'be' (Bias-Eli only), 'ls' (CPnP LS + "
+                              "weighted step), 'epnp' / 'sqpnp' (OpenCV + LM)")
+    depth_weights: bool = opt(False, "linear-step row weights Z^-3/2 (the authors' code) instead of 1")
+    current_noise: bool = opt(False, "add the current-frame noise sigma^2 I to the step's weights (spec 5.4)")
+    min_points: int = opt(12, "fewer verified matches than this is a tracking failure")
+    max_median_px: float = opt(2.0, "a pose whose median reprojection error exceeds this is a failure (px)")
+
+
+@dataclass
+class KeyframeConfig:
+    """When a new keyframe is inserted (spec 12.1)."""
+
+    min_tracked_ratio: float = opt(0.5, "new keyframe when verified matches < ratio * keyframe points ...")
+    min_tracked: int = opt(100, "... or < this count")
+    max_mean_disp_px: float = opt(30.0, "... or the mean displacement since the keyframe exceeds this (px)")
+    max_frames: int = opt(0, "... or this many frames since the keyframe (0: no limit)")
+
+
+@dataclass
+class BAConfig:
+    """Epipolar local BA over the last two keyframes and the frames between (spec 10)."""
+
+    enabled: bool = opt(True, "run the BA at each keyframe insertion")
+    kernel: str = opt("huber", "'huber' (delta = 3 sigma), 'truncated', 'none'")
+    max_iter: int = opt(10, "LM iterations")
+    max_step_ratio: float = opt(0.5, "reject a BA that moves the new keyframe by more than this fraction of "
+                                     "the window's translation plus 5 cm")
+
+
+@dataclass
+class RunConfig:
+    """Run-level settings."""
+
+    seed: int = opt(0, "RANSAC seed; frame k uses seed + k (determinism)")
+    align: str = opt("se3", "alignment of the run's evaluation (se3 for stereo)")
+    rpe_delta: float = opt(1.0, "RPE delta in frames")
+
+
+@dataclass
+class OdometryConfig:
+    """The whole configuration of a `gevi run`."""
+
+    frontend: FrontendConfig = field(default_factory=FrontendConfig)
+    verify: VerifyConfig = field(default_factory=VerifyConfig)
+    triangulation: TriangulationConfig = field(default_factory=TriangulationConfig)
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    pnp: PnPConfig = field(default_factory=PnPConfig)
+    keyframe: KeyframeConfig = field(default_factory=KeyframeConfig)
+    ba: BAConfig = field(default_factory=BAConfig)
+    run: RunConfig = field(default_factory=RunConfig)
+
+    def validate(self, where: str = "config") -> "OdometryConfig":
+        from gevi_cli.config import check_choice
+
+        check_choice(self.pnp.method, PNP_METHODS, f"{where}: pnp.method")
+        check_choice(self.verify.ransac, RANSAC_METHODS, f"{where}: verify.ransac")
+        check_choice(self.verify.l1, L1_METHODS, f"{where}: verify.l1")
+        check_choice(self.noise.method, NOISE_METHODS, f"{where}: noise.method")
+        check_choice(self.ba.kernel, ("huber", "truncated", "none"), f"{where}: ba.kernel")
+        return self

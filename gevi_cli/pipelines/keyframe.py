@@ -1,0 +1,54 @@
+"""A keyframe of the CurrentFeature-style back ends: its stereo matches triangulated with covariance.
+
+Only the *current* keyframe's points are used for tracking (no map, spec 2): when a new keyframe is
+inserted the previous points are dropped, so pose errors and point errors stay independent.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gevi_cli import estimators as est
+from gevi_cli.frontend.types import RectifiedStereo, StereoObs
+
+
+@dataclass
+class Keyframe:
+    """``index`` frame index; ``T_w_k`` pose of its rectified cam0 in the world (4x4).
+
+    ``ids``/``z``/``p``/``cov_unit`` describe the points that passed the depth gate: normalized left
+    coordinates ``z`` (n, 2), points ``p`` (n, 3) in keyframe-left coordinates (m) and their
+    covariance per unit image variance ``cov_unit`` (n, 3, 3; multiply by sigma^2 in normalized
+    units).  ``stereo`` keeps all matches (normalized) for the local BA.
+    """
+
+    index: int
+    t_ns: int
+    T_w_k: np.ndarray
+    ids: np.ndarray
+    z: np.ndarray
+    y: np.ndarray
+    p: np.ndarray
+    cov_unit: np.ndarray
+    stereo_left: est.ImageObs
+    stereo_right: est.ImageObs
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+
+def make_keyframe(index: int, t_ns: int, T_w_k: np.ndarray, stereo: StereoObs, camera: RectifiedStereo,
+                  min_depth_m: float, max_depth_m: float) -> Keyframe:
+    """Triangulate ``stereo`` (spec 4) and keep the points inside the depth gate."""
+    ids = np.asarray(stereo.ids, dtype=np.int64)
+    z = camera.normalize(stereo.uv_left)
+    y = camera.normalize(stereo.uv_right)
+    depth = camera.depth_from_disparity(stereo.disparity)
+    keep = (depth >= min_depth_m) & (depth <= max_depth_m) & np.isfinite(depth)
+    if keep.sum() >= 3:
+        p, cov_unit = est.triangulate(z[keep], y[keep], camera.R_rl, camera.t_rl, 1.0)
+    else:
+        p, cov_unit = np.empty((0, 3)), np.empty((0, 3, 3))
+    return Keyframe(index, t_ns, np.asarray(T_w_k, dtype=np.float64), ids[keep], z[keep], y[keep], p, cov_unit,
+                    est.ImageObs(ids, z), est.ImageObs(ids, y))

@@ -1,0 +1,239 @@
+"""The keyframe-relative odometry core shared by CurrentFeature Odometry and GeVI.
+
+Data flow per frame (spec 2):  front end ``track`` -> match ids with the current keyframe ->
+verification (pipeline's choice) -> noise variance -> pose of the keyframe in the current frame
+``T_ck`` (pipeline's choice) -> keyframe rule -> at a new keyframe: epipolar local BA over the
+previous keyframe, the frames between and the new keyframe (spec 10), then triangulation of the new
+keyframe.  The trajectory is the chain of keyframe-relative poses.
+
+Frames: ``T_w_c`` is the pose of rectified cam0 in the world frame W, which is the first keyframe's
+rectified cam0; ``T_ck`` maps keyframe-left coordinates into current-left coordinates (metres).
+
+The object holds state only (as KISS-ICP's ``register_frame``): no files, no clocks other than
+per-stage timings, no printing; the run driver owns all of that.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from gevi_cli import estimators as est
+from gevi_cli.frontend import FrontEnd
+from gevi_cli.geometry import invert_pose
+from gevi_cli.pipelines.config import OdometryConfig
+from gevi_cli.pipelines.keyframe import Keyframe, make_keyframe
+from gevi_cli.pipelines.types import BRIDGED, OK, FrameResult
+from gevi_cli.pipelines.verification import TrackingFailure
+
+
+@dataclass
+class WindowFrame:
+    """A frame tracked against the current keyframe: left observations and ``T_kc`` (frame in KF)."""
+
+    index: int
+    t_ns: int
+    left: est.ImageObs
+    T_kc: np.ndarray
+    ok: bool
+
+
+@dataclass
+class Matches:
+    """Keyframe points seen in the current frame (all arrays aligned)."""
+
+    ids: np.ndarray
+    z: np.ndarray  # keyframe-left normalized
+    q: np.ndarray  # current-left normalized
+    p: np.ndarray  # keyframe-left points (m)
+    cov_unit: np.ndarray
+
+
+def _make_T(R, t) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, t
+    return T
+
+
+class KeyframeOdometry:
+    """Base class; subclasses set ``self.verification`` and implement :meth:`estimate_T_ck`."""
+
+    name = "odometry"
+
+    def __init__(self, frontend: FrontEnd, cfg: OdometryConfig):
+        self.frontend = frontend
+        self.camera = frontend.camera
+        self.cfg = cfg
+        self.kf: Keyframe | None = None
+        self.window: list[WindowFrame] = []
+        self.pending: list[tuple[int, np.ndarray]] = []  # (index, T_w_c) not final yet
+        self.index = -1
+        self.sigma2 = (cfg.noise.default_px / self.camera.f) ** 2
+        self.sigma2_valid = False
+        self.T_w_last: np.ndarray | None = None
+        self.velocity = np.eye(4)  # T_{prev,cur} of the last tracked step
+        self.verification = None
+
+    # ------------------------------------------------------------------ to be provided by pipelines
+    def estimate_T_ck(self, m: Matches, frame) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------------------- main entry
+    def track(self, frame) -> FrameResult:
+        """Track one frame; never raises for tracking problems (they become ``bridged`` frames)."""
+        self.index += 1
+        timings: dict[str, float] = {}
+        t0 = time.perf_counter()
+        obs = self.frontend.track(frame)
+        timings.update({f"fe_{k}": v for k, v in getattr(self.frontend, "timings", {}).items()})
+        timings["frontend"] = time.perf_counter() - t0
+        res = FrameResult(self.index, int(frame.t_ns), np.eye(4))
+        T_ck = None
+        failure = ""
+        if self.kf is not None:
+            try:
+                T_ck, n_match, n_in, disp_px = self._track_against_kf(obs, frame, timings)
+                res.n_matches, res.n_inliers = n_match, n_in
+            except TrackingFailure as err:
+                failure = str(err)
+        elif self.index > 0:
+            failure = "no keyframe to track against"
+        if self.index == 0:
+            res.T_w_c = np.eye(4)
+        elif T_ck is not None:
+            res.T_w_c = self.kf.T_w_k @ invert_pose(T_ck)
+        else:
+            res.T_w_c = (self.T_w_last if self.T_w_last is not None else np.eye(4)) @ self.velocity
+            res.status, res.message = BRIDGED, failure
+        res.sigma_px = float(np.sqrt(self.sigma2) * self.camera.f)
+
+        decision = self.frontend.keyframe_decision(frame)
+        if decision is None:
+            decision = self.kf is None or T_ck is None or self._keyframe_rule(res, disp_px if T_ck is not None else 0.0)
+        if T_ck is not None and self.kf is not None:
+            self.window.append(WindowFrame(res.index, res.t_ns, est.ImageObs(obs.ids, self.camera.normalize(obs.uv)),
+                                           invert_pose(T_ck), True))
+        elif self.kf is not None:
+            self.window.append(WindowFrame(res.index, res.t_ns, est.ImageObs(obs.ids, self.camera.normalize(obs.uv)),
+                                           invert_pose(self.kf.T_w_k) @ res.T_w_c, False))
+        self.pending.append((res.index, res.T_w_c))
+        if decision:
+            t1 = time.perf_counter()
+            self._insert_keyframe(frame, res, timings)
+            timings["keyframe"] = time.perf_counter() - t1 - timings.get("ba", 0.0)
+        elif not self.cfg.ba.enabled or self.kf is None:
+            res.final, self.pending = self.pending, []
+        # the constant-velocity bridge continues from the best pose known (after BA at a keyframe)
+        T_now = self.kf.T_w_k if res.keyframe else res.T_w_c
+        if self.T_w_last is not None and res.status == OK:
+            self.velocity = invert_pose(self.T_w_last) @ T_now
+        self.T_w_last = T_now
+        res.timings = timings
+        return res
+
+    def finish(self) -> list[tuple[int, np.ndarray]]:
+        """Poses still pending (their window never closed): final as tracked."""
+        out, self.pending = self.pending, []
+        return out
+
+    # --------------------------------------------------------------------------------- stages
+    def _match(self, obs) -> Matches:
+        kf = self.kf
+        _, i_kf, i_obs = np.intersect1d(kf.ids, obs.ids, assume_unique=True, return_indices=True)
+        return Matches(kf.ids[i_kf], kf.z[i_kf], self.camera.normalize(obs.uv[i_obs]), kf.p[i_kf], kf.cov_unit[i_kf])
+
+    def _update_sigma2(self, z: np.ndarray, q: np.ndarray) -> None:
+        cfg = self.cfg.noise
+        if cfg.method == "stereo":
+            return  # estimated at keyframe insertion
+        try:
+            s2 = est.sigma2_symmetric(z, q) if cfg.method == "symmetric" else est.sigma2_onesided(q, z)
+        except est.EstimatorError:
+            return
+        self._set_sigma2(s2)
+
+    def _set_sigma2(self, s2: float) -> None:
+        cfg = self.cfg.noise
+        if not np.isfinite(s2) or s2 <= 0:
+            return
+        f = self.camera.f
+        lo, hi = (cfg.min_px / f) ** 2, (cfg.max_px / f) ** 2
+        self.sigma2 = float(np.clip(s2, lo, hi))
+        self.sigma2_valid = True
+
+    def _track_against_kf(self, obs, frame, timings):
+        t0 = time.perf_counter()
+        m = self._match(obs)
+        n_match = len(m.ids)
+        if n_match < self.cfg.pnp.min_points:
+            raise TrackingFailure(f"only {n_match} keyframe points tracked")
+        keep = self.verification(m.z, m.q, m.p, self.cfg.run.seed + self.index)
+        m = Matches(m.ids[keep], m.z[keep], m.q[keep], m.p[keep], m.cov_unit[keep])
+        t1 = time.perf_counter()
+        timings["verify"] = t1 - t0
+        if len(m.ids) < self.cfg.pnp.min_points:
+            raise TrackingFailure(f"only {len(m.ids)} of {n_match} matches pass verification")
+        self._update_sigma2(m.z, m.q)
+        t2 = time.perf_counter()
+        timings["noise"] = t2 - t1
+        T_ck = self.estimate_T_ck(m, frame)
+        timings["pose"] = time.perf_counter() - t2
+        disp_px = float(np.mean(np.linalg.norm(m.q - m.z, axis=1))) * self.camera.f
+        return T_ck, n_match, len(m.ids), disp_px
+
+    def _keyframe_rule(self, res: FrameResult, disp_px: float) -> bool:
+        k = self.cfg.keyframe
+        if res.n_inliers < max(k.min_tracked_ratio * len(self.kf), k.min_tracked):
+            return True
+        if disp_px > k.max_mean_disp_px:
+            return True
+        return bool(k.max_frames and res.index - self.kf.index >= k.max_frames)
+
+    def _insert_keyframe(self, frame, res: FrameResult, timings) -> None:
+        cfg = self.cfg
+        stereo = self.frontend.keyframe(frame)
+        timings.update({f"fe_{k}": timings.get(f"fe_{k}", 0.0) + v
+                        for k, v in getattr(self.frontend, "timings", {}).items()})
+        new = make_keyframe(res.index, res.t_ns, res.T_w_c, stereo, self.camera, cfg.triangulation.min_depth_m,
+                            cfg.triangulation.max_depth_m)
+        if cfg.noise.method == "stereo" and len(new) >= 9:
+            try:
+                self._set_sigma2(est.sigma2_stereo(new.z, new.y, self.camera.R_rl, self.camera.t_rl))
+            except est.EstimatorError:
+                pass
+        if self.kf is not None and cfg.ba.enabled and res.status == OK:
+            t0 = time.perf_counter()
+            T_w_new = self._local_ba(new)
+            timings["ba"] = time.perf_counter() - t0
+            if T_w_new is not None:
+                new.T_w_k = T_w_new
+        res.final, self.pending = self.pending, []
+        if len(new) >= cfg.triangulation.min_points:
+            self.kf = new
+            res.keyframe = True
+        elif self.kf is None or res.status != OK:
+            self.kf = None  # nothing to track against until a frame gives enough stereo points
+        self.window = []
+
+    def _local_ba(self, new: Keyframe) -> np.ndarray | None:
+        """Spec 10 over (current KF, window frames, ``new``); updates pending poses; new T_w_k or None."""
+        kf, frames = self.kf, self.window
+        if not frames or not all(f.ok for f in frames) or frames[-1].index != new.index:
+            return None
+        T_k = np.array([f.T_kc for f in frames])  # T_K1_Fk, last = the new keyframe
+        window = est.BAWindow(kf.stereo_left, kf.stereo_right, [f.left for f in frames[:-1]], new.stereo_left,
+                              new.stereo_right, T_k[:, :3, :3], T_k[:, :3, 3], self.camera.R_rl, self.camera.t_rl,
+                              sigma=float(np.sqrt(self.sigma2)))
+        try:
+            r = est.epipolar_local_ba(window, est.BAOptions(kernel=self.cfg.ba.kernel, max_iter=self.cfg.ba.max_iter))
+        except est.EstimatorError:
+            return None
+        t_track, t_ba = T_k[-1, :3, 3], r.t[-1]
+        span = np.linalg.norm(t_track)
+        if (not np.all(np.isfinite(r.t)) or r.rms_final > r.rms_initial * 1.5
+                or np.linalg.norm(t_ba - t_track) > self.cfg.ba.max_step_ratio * span + 0.05):
+            return None
+        refined = {f.index: kf.T_w_k @ _make_T(r.R[i], r.t[i]) for i, f in enumerate(frames)}
+        self.pending = [(i, refined.get(i, T)) for i, T in self.pending]
+        return refined[new.index]

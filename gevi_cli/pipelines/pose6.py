@@ -1,0 +1,57 @@
+"""Keyframe -> current 6-DOF pose from triangulated keyframe points (spec 5) and its ablations.
+
+``be-w`` is the CurrentFeature estimator: Bias-Eli PnP (spec 5.2-5.3) + one weighted LM step
+(5.4).  ``be`` stops after the bias-eliminated linear step, ``ls`` uses the plain CPnP least
+squares (no bias elimination) + the same weighted step, so the two ablations isolate the two
+ingredients.  ``epnp``/``sqpnp`` are the textbook alternative: OpenCV's EPnP / SQPnP followed by
+OpenCV's (unweighted, iterated) LM refinement.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from gevi_cli import estimators as est
+from gevi_cli.pipelines.config import PnPConfig
+from gevi_cli.pipelines.verification import TrackingFailure
+
+
+def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig, sigma2: float):
+    """``(R_ck, t_ck)``: maps keyframe-left points ``p`` (n, 3, m) onto current normalized ``q`` (n, 2).
+
+    ``cov`` (n, 3, 3) point covariances (normalized-noise units already applied); ``sigma2`` the
+    normalized image-noise variance.  Raises :class:`TrackingFailure`.
+    """
+    try:
+        if cfg.method in ("epnp", "sqpnp"):
+            flag = cv2.SOLVEPNP_EPNP if cfg.method == "epnp" else cv2.SOLVEPNP_SQPNP
+            obj = np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 1, 3)
+            img = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 1, 2)
+            ok, rvec, tvec = cv2.solvePnP(obj, img, np.eye(3), None, flags=flag)
+            if not ok:
+                raise TrackingFailure(f"OpenCV {cfg.method} failed")
+            rvec, tvec = cv2.solvePnPRefineLM(obj, img, np.eye(3), None, rvec, tvec)
+            return cv2.Rodrigues(rvec)[0], tvec.ravel()
+        w = est.depth_weights(p) if cfg.depth_weights else None
+        if cfg.method == "ls":
+            R, t = est.pnp6_ls(p, q, weights=w)
+        else:
+            R, t = est.pnp6_be(p, cov, q, weights=w)
+        if cfg.method in ("be-w", "ls"):
+            R, t = est.pnp6_refine(R, t, p, cov, q, sigma2_q=sigma2 if cfg.current_noise else 0.0)
+        return R, t
+    except est.EstimatorError as err:
+        raise TrackingFailure(f"{cfg.method}: {err}") from None
+    except cv2.error as err:
+        raise TrackingFailure(f"OpenCV {cfg.method}: {str(err).strip().splitlines()[-1]}") from None
+
+
+def reprojection_median_px(R: np.ndarray, t: np.ndarray, p: np.ndarray, q: np.ndarray, f: float) -> float:
+    """Median reprojection error (px); a robust sanity check of a pose (a few outliers survive the
+    verification, so an RMS would flag good poses)."""
+    X = p @ R.T + t
+    front = X[:, 2] > 0
+    if front.sum() < 0.5 * len(X):
+        return float("inf")
+    r = q[front] - X[front, :2] / X[front, 2:3]
+    return float(np.median(np.linalg.norm(r, axis=1))) * f

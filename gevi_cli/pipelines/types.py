@@ -1,0 +1,33 @@
+"""Values the odometry objects return to the run driver."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+OK, BRIDGED, LOST = "ok", "bridged", "lost"
+
+
+@dataclass
+class FrameResult:
+    """Outcome of ``Odometry.track`` for one frame.
+
+    ``T_w_c`` (4x4) is the *online* pose of rectified cam0 in the world frame (= the first
+    keyframe's rectified cam0), as known when the frame was tracked.  ``status`` is ``ok``, or
+    ``bridged`` when the pose could not be estimated and was extrapolated at constant velocity.
+    ``final`` lists ``(index, T_w_c)`` poses that will not change any more (after the local BA of the
+    window they belong to, or immediately without BA); every frame appears there exactly once over a
+    run (the last ones on ``Odometry.finish()``).
+    """
+
+    index: int
+    t_ns: int
+    T_w_c: np.ndarray
+    status: str = OK
+    keyframe: bool = False
+    n_matches: int = 0
+    n_inliers: int = 0
+    sigma_px: float = float("nan")
+    message: str = ""
+    final: list = field(default_factory=list)
+    timings: dict = field(default_factory=dict)  # stage -> seconds

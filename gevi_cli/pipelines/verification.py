@@ -1,0 +1,65 @@
+"""Geometric verification of keyframe<->current matches: the stage a pipeline chooses.
+
+CurrentFeature Odometry (spec 12.1, 5.5): (1) 5-point essential-matrix RANSAC (OpenCV) between
+keyframe-left and current-left, then (2) the l1-norm PnP on the survivors and the drop of the
+``l1_drop`` fraction with the largest reprojection errors.  GeVI replaces stage (1) with its 3-point
+RANSAC with known roll/pitch and keeps (2); both expose ``__call__(z, q, p, seed) -> keep-mask``.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from gevi_cli import estimators as est
+from gevi_cli.frontend.types import RectifiedStereo
+from gevi_cli.pipelines.config import VerifyConfig
+
+
+class TrackingFailure(Exception):
+    """The frame cannot be tracked against the keyframe (too few points, estimator failure)."""
+
+
+def l1_stage(p: np.ndarray, q: np.ndarray, cfg: VerifyConfig) -> np.ndarray:
+    """Keep-mask of the l1-PnP pre-filter (spec 5.5) or all-true when disabled."""
+    if cfg.l1 == "none" or cfg.l1_drop <= 0:
+        return np.ones(len(p), dtype=bool)
+    try:
+        if cfg.l1 == "lp":
+            return est.pnp_l1_filter(p, q, drop=cfg.l1_drop)
+        return est.pnp_l1_filter(p, q, drop=cfg.l1_drop, method=cfg.l1)
+    except est.EstimatorError as err:
+        raise TrackingFailure(f"l1-PnP: {err}") from None
+
+
+class FivePointL1Verification:
+    """CFO's two-stage verification (5-point RANSAC, then l1-PnP drop)."""
+
+    def __init__(self, cfg: VerifyConfig, camera: RectifiedStereo):
+        self.cfg = cfg
+        self.camera = camera
+
+    def ransac(self, z: np.ndarray, q: np.ndarray, seed: int) -> np.ndarray:
+        cfg = self.cfg
+        n = len(z)
+        if cfg.ransac == "none" or n < 5:
+            return np.ones(n, dtype=bool)
+        parallax_px = np.median(np.linalg.norm(q - z, axis=1)) * self.camera.f
+        if parallax_px < cfg.min_parallax_px:
+            # No translation to speak of: every E = [t]x R fits, so RANSAC cannot classify.
+            return np.ones(n, dtype=bool)
+        cv2.setRNGSeed(int(seed))
+        E, mask = cv2.findEssentialMat(z.reshape(-1, 1, 2), q.reshape(-1, 1, 2), np.eye(3), method=cv2.RANSAC,
+                                       prob=cfg.ransac_prob, threshold=cfg.ransac_threshold_px / self.camera.f)
+        if E is None or mask is None:
+            raise TrackingFailure("5-point RANSAC found no essential matrix")
+        return mask.ravel().astype(bool)
+
+    def __call__(self, z: np.ndarray, q: np.ndarray, p: np.ndarray, seed: int) -> np.ndarray:
+        keep = self.ransac(z, q, seed)
+        idx = np.flatnonzero(keep)
+        if len(idx) < 6:
+            raise TrackingFailure(f"only {len(idx)} matches survive RANSAC")
+        sub = l1_stage(p[idx], q[idx], self.cfg)
+        out = np.zeros(len(z), dtype=bool)
+        out[idx[sub]] = True
+        return out

@@ -1,0 +1,149 @@
+"""The run driver: sequence -> odometry -> run folder (streamed), timing, progress, status.
+
+The odometry objects hold state only; this module owns I/O, clocks, the progress bar and the files
+(see :mod:`gevi_cli.run.folder`).  Poses are written the moment they are final, so an interrupted or
+crashed run leaves every pose it computed on disk, and ``status.json`` says how the run ended.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gevi_cli.errors import DataError
+from gevi_cli.geometry import invert_pose
+from gevi_cli.pipelines.types import BRIDGED
+from gevi_cli.run.folder import PoseStream, RunStatus, write_status
+
+#: timing.csv columns (ms); the front-end sub-stages are part of "frontend" and "keyframe".
+STAGES = ("frontend", "fe_rectify", "fe_pyramid", "fe_lk", "fe_detect", "fe_stereo", "verify", "noise", "pose",
+          "keyframe", "ba")
+
+
+@dataclass
+class RunOutcome:
+    status: RunStatus
+    exit_code: int  # 0 complete, 3 tracking lost on the way
+
+
+def _frames(source, start: int, stop: int):
+    """(index, frame or DataError) for indices start..stop-1; unreadable images do not stop a run."""
+    if hasattr(source, "_read_pair"):
+        for i in range(start, stop):
+            try:
+                yield i, source._read_pair(i)
+            except DataError as err:
+                yield i, err
+    else:
+        for f in source.frames(start, stop):
+            yield f.index, f
+
+
+def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: np.ndarray, start: int, stop: int,
+                 kitti_rows: bool, progress: bool = True, warn=print) -> RunOutcome:
+    """Track frames ``start:stop`` of ``source`` and stream the run folder ``run_dir``."""
+    from tqdm import tqdm
+
+    run_dir = Path(run_dir)
+    T_B_C, T_C_B = T_B_C0, invert_pose(T_B_C0)
+    body = PoseStream(run_dir / "traj_body.tum", "tum", "body")
+    cam0 = PoseStream(run_dir / "traj_cam0.tum", "tum", "cam0")
+    online = PoseStream(run_dir / "traj_online_body.tum", "tum", "body")
+    kitti = PoseStream(run_dir / "traj_cam0_kitti.txt", "kitti", "cam0") if kitti_rows else None
+    kitti_body = PoseStream(run_dir / "traj_body_kitti.txt", "kitti", "body") if kitti_rows else None
+    timing = open(run_dir / "timing.csv", "w", buffering=1)
+    timing.write("index,t_ns,total_ms," + ",".join(f"{s}_ms" for s in STAGES) + "\n")
+    frames_csv = open(run_dir / "frames.csv", "w", buffering=1)
+    frames_csv.write("index,t_ns,status,keyframe,matches,inliers,sigma_px,message\n")
+    stamps: dict[int, int] = {}
+    status.frames_total = stop - start
+    t_run = time.perf_counter()
+    lost_open = None
+
+    def emit_final(items):
+        for idx, T_w_c in items:
+            t_ns = stamps[idx]
+            cam0.append(t_ns, T_w_c)
+            body.append(t_ns, T_B_C @ T_w_c @ T_C_B)
+            if kitti is not None:
+                kitti.append(t_ns, T_w_c)
+                kitti_body.append(t_ns, T_B_C @ T_w_c @ T_C_B)
+
+    def close_lost(end_idx, end_t):
+        nonlocal lost_open
+        if lost_open is not None:
+            i0, t0, reason, n = lost_open
+            status.lost_intervals.append({"first_index": i0, "start_s": t0 * 1e-9, "end_s": end_t * 1e-9,
+                                          "frames": n, "reason": reason})
+            lost_open = None
+
+    bar = tqdm(total=stop - start, unit="frame", disable=not progress, dynamic_ncols=True, leave=False)
+    write_status(run_dir, status)
+    try:
+        k = 0  # index inside the odometry (unreadable frames are skipped, not tracked)
+        for index, frame in _frames(source, start, stop):
+            if isinstance(frame, DataError):
+                status.skipped_frames.append({"index": index, "reason": frame.one_line()})
+                warn(f"frame {index} skipped: {frame.one_line()}")
+                bar.update(1)
+                continue
+            t0 = time.perf_counter()
+            res = odometry.track(frame)
+            total = time.perf_counter() - t0
+            stamps[res.index] = res.t_ns
+            online.append(res.t_ns, T_B_C @ res.T_w_c @ T_C_B)
+            emit_final(res.final)
+            timing.write(f"{index},{res.t_ns},{total * 1e3:.3f}," + ",".join(
+                f"{res.timings.get(s, 0.0) * 1e3:.3f}" for s in STAGES) + "\n")
+            msg = res.message.replace(",", ";").replace("\n", " ")
+            frames_csv.write(f"{index},{res.t_ns},{res.status},{int(res.keyframe)},{res.n_matches},{res.n_inliers},"
+                             f"{res.sigma_px:.4f},{msg}\n")
+            status.frames_done += 1
+            status.keyframes += int(res.keyframe)
+            if res.status == BRIDGED:
+                status.bridged_frames.append(index)
+                if lost_open is None:
+                    lost_open = [index, res.t_ns, res.message, 0]
+                lost_open[3] += 1
+            else:
+                status.frames_tracked += 1
+                close_lost(index, res.t_ns)
+            k += 1
+            bar.update(1)
+            if progress and k % 10 == 0:
+                bar.set_postfix_str(f"kf {status.keyframes} inl {res.n_inliers}")
+            if k % 50 == 0:
+                status.elapsed_s = time.perf_counter() - t_run
+                write_status(run_dir, status)
+        if lost_open is not None:
+            close_lost(None, max(stamps.values()) if stamps else 0)
+        emit_final(odometry.finish())
+        status.state = "lost-tracking" if status.lost_intervals else "ok"
+        if status.lost_intervals:
+            status.message = (f"tracking lost {len(status.lost_intervals)} time(s); {len(status.bridged_frames)} "
+                              "frame(s) bridged at constant velocity")
+        elif status.frames_done < 2:
+            status.state, status.message = "lost-tracking", f"only {status.frames_done} frame(s) could be read"
+    except KeyboardInterrupt:
+        emit_final(odometry.finish())
+        status.state, status.message = "interrupted", f"interrupted after {status.frames_done} frames"
+        raise
+    except Exception as exc:
+        try:
+            emit_final(odometry.finish())
+        except Exception:  # the state may be what broke; what was final is already on disk
+            pass
+        status.state, status.message = "crashed", f"{type(exc).__name__}: {exc}"
+        raise
+    finally:
+        bar.close()
+        for s in (body, cam0, online, kitti, kitti_body):
+            if s is not None:
+                s.close()
+        timing.close()
+        frames_csv.close()
+        status.elapsed_s = time.perf_counter() - t_run
+        write_status(run_dir, status)
+    return RunOutcome(status, 0 if status.state == "ok" else 3)
