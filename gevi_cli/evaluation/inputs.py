@@ -82,8 +82,38 @@ def _natural_key(s: str):
     return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", s)]
 
 
+def run_primary(folder: Path) -> Path | None:
+    """The primary trajectory of a `gevi run` folder (named by its ``status.json``), else None."""
+    status = folder / "status.json"
+    if not status.is_file():
+        return None
+    try:
+        name = json.loads(status.read_text()).get("primary")
+    except (ValueError, AttributeError):
+        raise GeviError(status, "is not a gevi run status file (invalid JSON)") from None
+    if not isinstance(name, str) or not name:
+        raise GeviError(status, "names no primary trajectory")
+    return folder / name if (folder / name).is_file() else None
+
+
+def _run_folders(folder: Path) -> list[Path]:
+    """`gevi run` folders inside a sequence folder (the ``latest`` link is not a trial of its own)."""
+    return sorted([p for p in folder.iterdir() if p.is_dir() and not p.is_symlink() and (p / "status.json").is_file()],
+                  key=lambda p: _natural_key(p.name))
+
+
 def trials_in(folder: Path) -> list[tuple[str, Path | None]]:
-    """(trial name, file) of a sequence (or -e) folder; see module docstring.  Raises on ambiguity."""
+    """(trial name, file) of a sequence (or -e) folder; see module docstring.  Raises on ambiguity.
+
+    A `gevi run` folder (it holds ``status.json``) is one estimate: the primary trajectory it names
+    (other trajectories and CSVs in it are not estimates).  A folder of run folders
+    (``results/<method>/<sequence>/<timestamp>/``) holds one trial per run folder.
+    """
+    if (folder / "status.json").is_file():
+        return [("", run_primary(folder))]
+    runs = _run_folders(folder)
+    if runs:
+        return [(r.name, run_primary(r)) for r in runs]
     runs = sorted([p for p in folder.iterdir() if p.is_dir() and p.name.startswith("run")],
                   key=lambda p: _natural_key(p.name))
     if runs:
@@ -146,6 +176,8 @@ def discover_results(root: Path) -> tuple[list[EstimateSpec], dict[str, Path]]:
                     local_gt.setdefault(seq, gt)
                 for trial, f in trials_in(sdir):
                     hints = [f.parent] if f is not None and f.parent != sdir else []
+                    if f is None and trial and (sdir / trial).is_dir():
+                        hints = [sdir / trial]
                     specs.append(EstimateSpec(method, seq, trial, f, hints + [sdir, mdir]))
             elif sdir.is_file() and sdir.suffix.lower() in TRAJ_EXTS and not is_gt_name(sdir):
                 specs.append(EstimateSpec(method, sequence_name(sdir, method), "", sdir, [mdir]))

@@ -171,7 +171,10 @@ def execute(req: RunRequest, echo=print) -> int:
                   **dataclasses.asdict(cfg)}
     (run_dir / "config.yaml").write_text(yaml.safe_dump(config_doc, sort_keys=False))
     kitti_rows = kind in ("kitti", "ov2slam-tracks")
-    status = RunStatus(method=req.method, primary=PRIMARY_KITTI if kitti_rows else PRIMARY, sequence=seq_name, gevi_version=__version__,
+    # KITTI ground truth without stamps is matched by frame index: then the KITTI rows are primary
+    gt_traj = getattr(source, "groundtruth", None)
+    indexed_gt = kitti_rows and gt_traj is not None and gt_traj.indexed
+    status = RunStatus(method=req.method, primary=PRIMARY_KITTI if indexed_gt else PRIMARY, sequence=seq_name, gevi_version=__version__,
                        command=" ".join(["gevi"] + sys.argv[1:]), started=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
     echo(f"gevi run: {req.method} on {seq_name} ({kind}), frames {req.start}..{stop - 1} -> {run_dir}")
 

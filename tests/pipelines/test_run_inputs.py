@@ -1,0 +1,59 @@
+"""`gevi run` configuration and bad input: one line, exit 2, never a traceback."""
+from __future__ import annotations
+
+import pytest
+
+from support import run_cli
+
+
+def test_dump_config_lists_every_key_with_its_default(capsys):
+    code, out, _ = run_cli(["run", "--dump-config"], capsys)
+    assert code == 0
+    keys = dict(line.split("=", 1)[0:2] for line in out.splitlines() if "=" in line and not line.startswith("#"))
+    for key in ("frontend.cell_px", "verify.ransac", "verify.l1_drop", "pnp.method", "keyframe.min_tracked",
+                "ba.enabled", "run.seed", "triangulation.max_depth_m", "noise.method"):
+        assert key in keys, key
+    assert keys["pnp.method"].split()[0] == "be-w" and keys["verify.l1_drop"].split()[0] == "0.1"
+
+
+def test_set_and_shortcuts_override_in_order(capsys):
+    code, out, _ = run_cli(["run", "--dump-config", "--set", "pnp.method=epnp", "--set", "keyframe.min_tracked=50",
+                            "--no-ba", "--seed", "7"], capsys)
+    assert code == 0
+    assert "pnp.method=epnp" in out and "keyframe.min_tracked=50" in out
+    assert "ba.enabled=false" in out and "run.seed=7" in out
+
+
+@pytest.mark.parametrize("args, where, what", [
+    (["--set", "pnp.nope=1"], "--set: pnp", "unknown key 'nope'"),
+    (["--set", "nostage.k=1"], "--set", "unknown key 'nostage'"),
+    (["--set", "keyframe.min_tracked=many"], "keyframe: min_tracked", "expected an integer"),
+    (["--set", "pnp.method=magic"], "pnp.method", "is not one of"),
+    (["--set", "justakey"], "--set", "expected stage.key=value"),
+])
+def test_bad_set_is_one_line(args, where, what, capsys):
+    code, _, err = run_cli(["run", "--dump-config"] + args, capsys)
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith("gevi: error: ")
+    assert where in err and what in err
+
+
+def test_bad_config_file_names_file_and_line(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("pnp:\n  method: be-w\n  min_points: [1,\n")
+    code, _, err = run_cli(["run", "--dump-config", "--config", bad], capsys)
+    assert code == 2 and err.count("\n") == 1 and f"{bad}:" in err and "not valid YAML" in err
+    wrong = tmp_path / "wrong.yaml"
+    wrong.write_text("pnp:\n  min_points: 1.5\n")
+    code, _, err = run_cli(["run", "--dump-config", "--config", wrong], capsys)
+    assert code == 2 and "min_points" in err and "integer" in err
+
+
+def test_not_a_sequence(tmp_path, capsys):
+    (tmp_path / "junk.txt").write_text("hello")
+    code, _, err = run_cli(["run", tmp_path, "-o", tmp_path / "out"], capsys)
+    assert code == 2 and err.count("\n") == 1 and str(tmp_path) in err
+    code, _, err = run_cli(["run", tmp_path / "missing"], capsys)
+    assert code == 2 and "no such file or folder" in err
+    code, _, err = run_cli(["run"], capsys)
+    assert code == 2 and "SEQUENCE" in err
