@@ -72,7 +72,10 @@ def cli(ctx, debug):
 def main(argv=None):
     debug = "--debug" in (argv if argv is not None else sys.argv[1:])
     try:
-        cli.main(args=argv, prog_name="gevi", standalone_mode=False)
+        code = cli.main(args=argv, prog_name="gevi", standalone_mode=False)
+        # without standalone mode click returns (does not raise) a command's Exit code
+        if isinstance(code, int) and code:
+            sys.exit(code)
     except GeviError as err:
         if debug:
             raise

@@ -42,6 +42,11 @@ def _coerce(value, typ, where: str):
     if typ is float:
         if isinstance(value, (int, float)) and not isinstance(value, bool):
             return float(value)
+        if isinstance(value, str):  # YAML 1.1 reads '1e-6' (no dot) as a string
+            try:
+                return float(value)
+            except ValueError:
+                pass
         raise GeviError(where, f"expected a number, got {value!r}")
     if typ is str:
         if isinstance(value, (str, int, float)) and not isinstance(value, bool):

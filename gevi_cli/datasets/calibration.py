@@ -58,7 +58,10 @@ class PinholeCamera:
         if self.distortion_model == "equidistant":
             out = cv2.fisheye.undistortPoints(uv, self.K, self.dist_coeffs)
         elif self.distortion_model == "radtan":
-            out = cv2.undistortPoints(uv, self.K, self.dist_coeffs)
+            # OpenCV's default 5 fixed-point iterations leave up to 0.4 px near the border of strong
+            # radtan lenses (EuRoC k1 = -0.28); iterate to convergence instead.
+            out = cv2.undistortPoints(uv, self.K, self.dist_coeffs, None, None, None,
+                                          (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12))
         else:
             out = (uv - [self.cx, self.cy]) / [self.fx, self.fy]
         return out.reshape(-1, 2)

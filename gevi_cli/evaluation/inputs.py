@@ -258,12 +258,9 @@ def load_T_B_C0(path: Path) -> np.ndarray:
     text = path.read_text()
     vals = None
     if path.suffix.lower() in (".yaml", ".yml"):
-        import yaml
+        from gevi_cli.datasets.yamlio import load_yaml
 
-        try:
-            data = yaml.safe_load(text)
-        except Exception as exc:
-            raise GeviError(path, f"not valid YAML: {exc}") from None
+        data = load_yaml(path)  # takes what the dataset readers take (EuRoC's %YAML:1.0 header)
         for key in ("T_B_C0", "T_BS", "T_B_C"):
             if isinstance(data, dict) and key in data:
                 v = data[key]

@@ -70,8 +70,9 @@ def detect_grid(img: np.ndarray, occupied_uv: np.ndarray | None, cfg: FrontendCo
 
     A cell holding any point of ``occupied_uv`` (tracked features, pixels) gets no corner; nor does
     the ``border_px`` margin or where ``mask`` (optional, same size) is zero.  A candidate is dropped
-    when a stronger candidate or an occupied point is closer than ``min_distance_px`` (neighbouring
-    cells only can be, as ``min_distance_px < cell_px``).
+    when a stronger candidate or an occupied point is closer than ``min_distance_px``.  The quality
+    level is relative to the strongest corner of the whole image (outside border and mask, occupied
+    cells included), so the threshold does not depend on which cells happen to be tracked.
     """
     img = np.ascontiguousarray(img)
     if img.ndim != 2 or img.dtype != np.uint8:
@@ -111,14 +112,17 @@ def detect_grid(img: np.ndarray, occupied_uv: np.ndarray | None, cfg: FrontendCo
 
     r2 = float(cfg.min_distance_px) ** 2
     if r2 > 0.0:
-        # candidate vs candidate in the 8 neighbouring cells: the weaker one goes (ties: later cell)
+        # Only cells up to k away can hold a point closer than min_distance_px (k = 1 for the defaults).
+        k = int(np.ceil(cfg.min_distance_px / cell))
+        # candidate vs candidate: the weaker one goes (ties: the later cell)
         rank = np.where(ok, best, -np.inf)
         order = np.arange(ny * nx).reshape(ny, nx)
         drop = np.zeros_like(ok)
-        for dy in (-1, 0, 1):
-            for dx in (-1, 0, 1):
-                if dy == 0 and dx == 0:
+        for dy in range(-k, k + 1):
+            for dx in range(-k, k + 1):
+                if (dy == 0 and dx == 0) or abs(dy) >= ny or abs(dx) >= nx:
                     continue
+                # destination cell (i, j), neighbour (i + dy, j + dx)
                 ys, yd = slice(max(dy, 0), ny + min(dy, 0)), slice(max(-dy, 0), ny + min(-dy, 0))
                 xs, xd = slice(max(dx, 0), nx + min(dx, 0)), slice(max(-dx, 0), nx + min(-dx, 0))
                 near = (u[yd, xd] - u[ys, xs]) ** 2 + (v[yd, xd] - v[ys, xs]) ** 2 < r2
@@ -127,14 +131,15 @@ def detect_grid(img: np.ndarray, occupied_uv: np.ndarray | None, cfg: FrontendCo
                 drop[yd, xd] |= near & stronger & ok[ys, xs]
         ok &= ~drop
         if len(occ):
-            # occupied points vs candidates in the 3x3 cells around each point
-            dy, dx = np.mgrid[-1:2, -1:2]
+            # occupied points vs the candidates in the (2k+1)^2 cells around each point
+            dy, dx = np.mgrid[-k:k + 1, -k:k + 1]
+            m = dy.size
             cy = (orow[:, None] + dy.ravel()).ravel()
             cx = (oc[:, None] + dx.ravel()).ravel()
             inside = (cy >= 0) & (cy < ny) & (cx >= 0) & (cx < nx)
             cy, cx = cy[inside], cx[inside]
-            pu = np.repeat(occ[:, 0], 9)[inside]
-            pv = np.repeat(occ[:, 1], 9)[inside]
+            pu = np.repeat(occ[:, 0], m)[inside]
+            pv = np.repeat(occ[:, 1], m)[inside]
             close = (u[cy, cx] - pu) ** 2 + (v[cy, cx] - pv) ** 2 < r2
             ok[cy[close], cx[close]] = False
     return np.column_stack([u[ok], v[ok]])

@@ -7,8 +7,10 @@ About pyramids: OpenCV's Python binding cannot pass a precomputed pyramid to
 ``cv2.buildOpticalFlowPyramid`` returns is refused (opencv/opencv#4777, still open; checked with
 OpenCV 5.0).  So :func:`build_pyramid` returns a :class:`Pyramid` handle holding the checked base
 image and the LK settings, made once per image and reused by the forward, backward and stereo calls;
-OpenCV rebuilds the levels inside each call (measured about 0.15 ms per image at 752x480, small next
-to the LK itself).  The levels themselves are available as :attr:`Pyramid.levels`, built on demand.
+OpenCV rebuilds the levels inside each call.  That price, measured as a one-point call: 0.27 ms at
+752x480, 0.33 ms at 1226x370, per call (``track`` makes two calls, a keyframe's stereo two per
+disparity hypothesis).  The levels themselves are available as :attr:`Pyramid.levels`, built on
+demand with ``cv2.buildOpticalFlowPyramid``; nothing in the tracking path uses them.
 """
 from __future__ import annotations
 
@@ -21,7 +23,7 @@ import numpy as np
 from gevi_cli.frontend.config import FrontendConfig
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # compared by identity: the image is an array
 class Pyramid:
     """One image prepared for LK: ``image`` (contiguous uint8, level 0), ``window`` (px), ``max_level``."""
 
@@ -51,8 +53,9 @@ def build_pyramid(img: np.ndarray, cfg: FrontendConfig) -> Pyramid:
     return Pyramid(np.ascontiguousarray(img), int(cfg.lk_window), int(cfg.lk_levels))
 
 
-def _lk(src: Pyramid, dst: Pyramid, uv: np.ndarray, guess: np.ndarray, cfg: FrontendConfig):
-    """One OpenCV LK call, ``uv`` in ``src`` -> ``dst`` starting from ``guess``; float32 inside."""
+def lk_once(src: Pyramid, dst: Pyramid, uv: np.ndarray, guess: np.ndarray, cfg: FrontendConfig):
+    """One OpenCV LK call (no checks): ``uv`` (n, 2) in ``src`` -> ``dst`` starting from ``guess``;
+    returns the points (n, 2) float64 and OpenCV's status (n,) bool.  Float32 inside OpenCV."""
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, int(cfg.lk_iters), float(cfg.lk_eps))
     out, status, _ = cv2.calcOpticalFlowPyrLK(
         src.image, dst.image, uv.astype(np.float32).reshape(-1, 1, 2), guess.astype(np.float32).reshape(-1, 1, 2),
@@ -71,8 +74,9 @@ def track_lk(pyr_prev: Pyramid, pyr_cur: Pyramid, uv_prev: np.ndarray, cfg: Fron
              uv_guess: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Track pixels ``uv_prev`` (n, 2) of the previous image into the current one.
 
-    Returns ``uv_cur`` (n, 2) float64 pixels and ``ok`` (n,) bool: LK status in both directions, the
-    result inside the image, and the forward-backward error ``|back(fwd(uv)) - uv| < fb_max_px``.
+    Returns ``uv_cur`` (n, 2) float64 pixels (NaN where not ok) and ``ok`` (n,) bool: LK status in
+    both directions, the result inside the image, and the forward-backward error
+    ``|back(fwd(uv)) - uv| < fb_max_px``.
     ``uv_guess`` (n, 2), default ``uv_prev``, is where the forward search starts.  The backward
     search starts at ``uv_cur`` moved back by the same prior displacement, so the check is as hard
     as the forward problem (starting it at ``uv_prev`` would let a wrong match pass trivially).
@@ -82,12 +86,13 @@ def track_lk(pyr_prev: Pyramid, pyr_cur: Pyramid, uv_prev: np.ndarray, cfg: Fron
     if n == 0:
         return np.empty((0, 2)), np.zeros(0, bool)
     guess = uv_prev if uv_guess is None else np.asarray(uv_guess, np.float64).reshape(-1, 2)
-    uv_cur, ok = _lk(pyr_prev, pyr_cur, uv_prev, guess, cfg)
+    uv_cur, ok = lk_once(pyr_prev, pyr_cur, uv_prev, guess, cfg)
     ok &= in_image(uv_cur, pyr_cur.shape)
     idx = np.flatnonzero(ok)  # track back only what survived the forward pass
     if len(idx):
         start = uv_cur[idx] - (guess[idx] - uv_prev[idx])
-        uv_back, ok_back = _lk(pyr_cur, pyr_prev, uv_cur[idx], start, cfg)
+        uv_back, ok_back = lk_once(pyr_cur, pyr_prev, uv_cur[idx], start, cfg)
         fb = np.linalg.norm(uv_back - uv_prev[idx], axis=1)
         ok[idx] = ok_back & (fb < cfg.fb_max_px)
+    uv_cur[~ok] = np.nan
     return uv_cur, ok

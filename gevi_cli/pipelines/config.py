@@ -25,7 +25,7 @@ class VerifyConfig:
     ransac_prob: float = opt(0.999, "RANSAC confidence")
     min_parallax_px: float = opt(0.5, "below this median KF->current displacement the essential matrix "
                                       "is undefined (no translation): the 5-point stage is skipped")
-    l1: str = opt("lp", "second stage: l1-PnP drop of the worst fraction: 'lp' (HiGHS), 'irls', 'none'")
+    l1: str = opt("irls", "second stage: l1-PnP drop of the worst fraction: 'irls' (exact l1 by IRLS + simplex polish, same keep-mask as the LP), 'lp' (HiGHS), 'none'")
     l1_drop: float = opt(0.10, "fraction of largest l1-PnP reprojection errors dropped")
     use_export_flags: bool = opt(False, "track exports only: drop the exporter's own outlier flags first")
 
@@ -59,7 +59,8 @@ class PnPConfig:
     depth_weights: bool = opt(False, "linear-step row weights Z^-3/2 (the authors' code) instead of 1")
     current_noise: bool = opt(False, "add the current-frame noise sigma^2 I to the step's weights (spec 5.4)")
     min_points: int = opt(12, "fewer verified matches than this is a tracking failure")
-    max_median_px: float = opt(2.0, "a pose whose median reprojection error exceeds this is a failure (px)")
+    max_median_px: float = opt(10.0, "a pose whose median reprojection error exceeds this is a failure (px); "
+                                           "loose, so ablations without the LM step (be) are not judged by it")
 
 
 @dataclass
@@ -79,6 +80,8 @@ class BAConfig:
     enabled: bool = opt(True, "run the BA at each keyframe insertion")
     kernel: str = opt("huber", "'huber' (delta = 3 sigma), 'truncated', 'none'")
     max_iter: int = opt(10, "LM iterations")
+    tol: float = opt(1e-4, "stop when the relative step or the relative robust-cost decrease is below this")
+    max_window: int = opt(0, "frames between the keyframes used by the BA (evenly thinned; 0: all)")
     max_step_ratio: float = opt(0.5, "reject a BA that moves the new keyframe by more than this fraction of "
                                      "the window's translation plus 5 cm")
 

@@ -50,6 +50,13 @@ class Matches:
     cov_unit: np.ndarray
 
 
+def _orthonormal(T: np.ndarray) -> np.ndarray:
+    U, _, Vt = np.linalg.svd(T[:3, :3])
+    out = T.copy()
+    out[:3, :3] = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    return out
+
+
 def _make_T(R, t) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, t
@@ -127,7 +134,8 @@ class KeyframeOdometry:
         # the constant-velocity bridge continues from the best pose known (after BA at a keyframe)
         T_now = self.kf.T_w_k if res.keyframe else res.T_w_c
         if self.T_w_last is not None and res.status == OK:
-            self.velocity = invert_pose(self.T_w_last) @ T_now
+            # re-orthonormalised: bridged poses are products of velocities, rounding must not grow
+            self.velocity = _orthonormal(invert_pose(self.T_w_last) @ T_now)
         self.T_w_last = T_now
         res.timings = timings
         return res
@@ -226,7 +234,8 @@ class KeyframeOdometry:
                               new.stereo_right, T_k[:, :3, :3], T_k[:, :3, 3], self.camera.R_rl, self.camera.t_rl,
                               sigma=float(np.sqrt(self.sigma2)))
         try:
-            r = est.epipolar_local_ba(window, est.BAOptions(kernel=self.cfg.ba.kernel, max_iter=self.cfg.ba.max_iter))
+            r = est.epipolar_local_ba(window, est.BAOptions(kernel=self.cfg.ba.kernel, max_iter=self.cfg.ba.max_iter,
+                                                           tol=self.cfg.ba.tol))
         except est.EstimatorError:
             return None
         t_track, t_ba = T_k[-1, :3, 3], r.t[-1]

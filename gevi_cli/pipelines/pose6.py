@@ -24,19 +24,20 @@ def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig
     """
     try:
         if cfg.method in ("epnp", "sqpnp"):
-            flag = cv2.SOLVEPNP_EPNP if cfg.method == "epnp" else cv2.SOLVEPNP_SQPNP
-            obj = np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 1, 3)
-            img = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 1, 2)
-            ok, rvec, tvec = cv2.solvePnP(obj, img, np.eye(3), None, flags=flag)
-            if not ok:
-                raise TrackingFailure(f"OpenCV {cfg.method} failed")
-            rvec, tvec = cv2.solvePnPRefineLM(obj, img, np.eye(3), None, rvec, tvec)
-            return cv2.Rodrigues(rvec)[0], tvec.ravel()
+            return _opencv_pnp(p, q, cv2.SOLVEPNP_EPNP if cfg.method == "epnp" else cv2.SOLVEPNP_SQPNP, refine=True)
         w = est.depth_weights(p) if cfg.depth_weights else None
         if cfg.method == "ls":
             R, t = est.pnp6_ls(p, q, weights=w)
         else:
-            R, t = est.pnp6_be(p, cov, q, weights=w)
+            try:
+                R, t = est.pnp6_be(p, cov, q, weights=w)
+            except est.DegenerateInput:
+                if cfg.method == "be":
+                    raise
+                # Spec 5.5 [PROPOSAL]: where the linear model breaks (kappa <= 0, few points) any
+                # robust PnP followed by the weighted step will do: SQPnP (global minimiser of the
+                # algebraic cost), then the same weighted LM step.
+                R, t = _opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False)
         if cfg.method in ("be-w", "ls"):
             R, t = est.pnp6_refine(R, t, p, cov, q, sigma2_q=sigma2 if cfg.current_noise else 0.0)
         return R, t
@@ -44,6 +45,18 @@ def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig
         raise TrackingFailure(f"{cfg.method}: {err}") from None
     except cv2.error as err:
         raise TrackingFailure(f"OpenCV {cfg.method}: {str(err).strip().splitlines()[-1]}") from None
+
+
+def _opencv_pnp(p: np.ndarray, q: np.ndarray, flag: int, refine: bool):
+    """OpenCV PnP on normalized coordinates (K = I), optionally + OpenCV's LM -> (R, t)."""
+    obj = np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 1, 3)
+    img = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 1, 2)
+    ok, rvec, tvec = cv2.solvePnP(obj, img, np.eye(3), None, flags=flag)
+    if not ok:
+        raise TrackingFailure("OpenCV PnP failed")
+    if refine:
+        rvec, tvec = cv2.solvePnPRefineLM(obj, img, np.eye(3), None, rvec, tvec)
+    return cv2.Rodrigues(rvec)[0], tvec.ravel()
 
 
 def reprojection_median_px(R: np.ndarray, t: np.ndarray, p: np.ndarray, q: np.ndarray, f: float) -> float:

@@ -188,9 +188,11 @@ def execute(req: RunRequest, echo=print) -> int:
     fps = st.frames_done / st.elapsed_s if st.elapsed_s > 0 else float("nan")
     echo(f"{st.frames_tracked}/{st.frames_done} frames tracked, {st.keyframes} keyframes, "
          f"{st.elapsed_s:.2f} s ({fps:.1f} frames/s)")
-    for iv in st.lost_intervals:
+    for iv in st.lost_intervals[:5]:
         echo(f"tracking lost at {iv['start_s']:.3f} s (frame {iv['first_index']}, {iv['frames']} frame(s) bridged): "
              f"{iv['reason']}")
+    if len(st.lost_intervals) > 5:
+        echo(f"... and {len(st.lost_intervals) - 5} more loss(es); see status.json and frames.csv")
     gt = _gt_source(req, source)
     if gt is not None:
         _evaluate(run_dir, req, cfg, gt, seq_name, st, echo)
@@ -210,12 +212,17 @@ def _evaluate(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status, ec
     from gevi_cli.evaluation.runner import run_eval
 
     lines = []
-    results, tables, _ = run_eval(
-        gt_opts=[str(gt)], estimates=[f"{req.method}={run_dir / status.primary}"], results_root=None, gt_root=None,
-        sequence_name=seq_name, align=cfg.run.align, n_align=-1, max_diff=0.01, t_offset=0.0,
-        rpe_delta=cfg.run.rpe_delta, rpe_unit="frames", min_coverage=0.0, est_frame="same", gt_frame="body",
-        t_b_c0=None, kitti=True, plots=req.plots, out=str(run_dir / "eval"), overwrite=True, keep_going=True,
-        quiet=True, echo=lambda *a, **k: lines.append(a[0] if a else ""))
+    try:
+        results, tables, _ = run_eval(
+            gt_opts=[str(gt)], estimates=[f"{req.method}={run_dir / status.primary}"], results_root=None, gt_root=None,
+            sequence_name=seq_name, align=cfg.run.align, n_align=-1, max_diff=0.01, t_offset=0.0,
+            rpe_delta=cfg.run.rpe_delta, rpe_unit="frames", min_coverage=0.0, est_frame="same", gt_frame="body",
+            t_b_c0=None, kitti=True, plots=req.plots, out=str(run_dir / "eval"), overwrite=True, keep_going=True,
+            quiet=True, echo=lambda *a, **k: lines.append(a[0] if a else ""))
+    except GeviError as err:  # the run is complete on disk; an unusable evaluation must not hide it
+        status.evaluation = {"failed": err.one_line()}
+        echo(f"evaluation failed: {err.one_line()}")
+        return
     r = results[0]
     if r.ok and r.ate is not None:
         rpe = r.rpe.trans_rmse if r.rpe is not None else float("nan")

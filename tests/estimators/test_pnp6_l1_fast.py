@@ -1,13 +1,13 @@
 """pnp6_l1_irls / l1_regression: the LP-free l1 PnP of spec 5.5 (IRLS warm start + exact vertex polish).
 
-Tolerance for "IRLS pose == LP pose": both return the same vertex of the l1 problem (11 rows at
-zero residual) when the minimiser is unique, which it is for continuous noise. The polish solves
-its 11 x 11 basis system exactly (rounding ~1e-16 times its condition number); HiGHS stops at its
-default primal/dual feasibility tolerance 1e-7 on the (unscaled) residuals, which at the depths
-of these scenes (1-10 m, unit-norm normalized coordinates) moves theta, and so R and t (m), by
-at most ~1e-7 times the conditioning of the basis. Measured differences over 20 scenes are
-< 1e-11; the bound 1e-7 leaves HiGHS its tolerance while still failing for any other vertex
-(a neighbouring vertex differs by ~1e-4, the noise scale of the pose).
+Tolerance for "IRLS pose == LP pose": when the l1 minimiser is unique (continuous noise) both
+return the same vertex of the l1 problem (11 rows at zero residual). The polish solves its
+11 x 11 basis system directly (rounding: ~1e-16 times the basis condition number); HiGHS stops
+at its default primal/dual feasibility tolerance 1e-7 on the unscaled residuals, which for these
+scenes (depths 1-10 m, O(1) normalized coordinates, well-conditioned bases) bounds the pose
+difference at about 1e-7 in R and in t (m). Bound: POSE_TOL = 1e-7. Measured over the 20 seeds
+below: <= 2.1e-12. The bound still separates the exact minimiser from any approximation of it:
+plain IRLS (20 steps, no polish) is 4e-4 to 9e-3 away from the LP pose on the same scenes.
 """
 import math
 
@@ -80,7 +80,7 @@ def test_pose_equals_lp_with_gross_outliers(seed):
 
 def test_plain_irls_is_only_approximate(rng):
     # without the polish the IRLS pose is close to the l1 pose but not equal to it: the reason
-    # the polish exists (it also shows the tolerance above separates vertices)
+    # the polish exists (and POSE_TOL tells the two apart)
     _, p, q, _ = _outlier_scene(rng)
     H, d, _ = build_H(p, q)
     exact = l1_regression(H, d)
@@ -89,7 +89,7 @@ def test_plain_irls_is_only_approximate(rng):
     assert exact.objective < plain.objective < exact.objective * 1.01
     R_lp, t_lp = pnp6_l1(p, q)
     R, t = pnp6_l1_irls(p, q, polish=False)
-    assert 1e-6 < max(np.max(np.abs(R - R_lp)), np.max(np.abs(t - t_lp))) < 1e-2
+    assert POSE_TOL < max(np.max(np.abs(R - R_lp)), np.max(np.abs(t - t_lp))) < 5e-2
 
 
 def test_filter_removes_gross_outliers_like_lp(rng):
@@ -100,15 +100,23 @@ def test_filter_removes_gross_outliers_like_lp(rng):
 
 
 def test_filter_ties_and_points_behind_camera(rng):
-    s = sim.scene6(rng, 60)
-    # duplicated correspondences: exact ties in the error at the 10 % boundary, broken by index
-    # in both methods (and a degenerate l1 vertex for the polish: more than 11 zero residuals)
-    p2, q2 = np.repeat(s.P, 2, axis=0), np.repeat(s.q_o, 2, axis=0)
-    q2[::7] += 0.03
-    assert np.array_equal(pnp_l1_filter(p2, q2, method="irls"), pnp_l1_filter(p2, q2, method="lp"))
+    # duplicated correspondences: exact ties in the error (bitwise, same inputs), and with
+    # 2 x 55 points ceil(0.1 * 110) = 11 drops split one tied pair at the 10 % boundary; both
+    # methods break the tie by index (the later copy is dropped). For the polish the duplicates
+    # make every vertex degenerate (the twin of a basis row is also at zero residual).
+    s, p, q, _ = _outlier_scene(rng, n=55)
+    p2, q2 = np.repeat(p, 2, axis=0), np.repeat(q, 2, axis=0)
+    H, d, _ = build_H(p2, q2)
+    assert l1_regression(H, d).certified
+    keep = pnp_l1_filter(p2, q2, method="irls")
+    assert np.array_equal(keep, pnp_l1_filter(p2, q2, method="lp"))
+    assert keep.sum() == 110 - 11
+    split = np.flatnonzero(keep[0::2] != keep[1::2])
+    assert len(split) == 1 and keep[2 * split[0]] and not keep[2 * split[0] + 1]
     # a point behind the current camera at the l1 pose counts as infinite error: always dropped
+    s = sim.scene6(rng, 60)
     p = s.P.copy()
-    p[5] = -(s.R.T @ (s.t + np.array([0.3, -0.2, 4.0])))  # X_C = R p + t has z = -4 m
+    p[5] = s.R.T @ (np.array([0.3, -0.2, -4.0]) - s.t)  # X_C = R p + t = (0.3, -0.2, -4) m
     q = s.q_o.copy()
     q[5] = [0.05, -0.05]
     for method in ("lp", "irls"):

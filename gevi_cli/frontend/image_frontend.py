@@ -1,0 +1,151 @@
+"""The LK front end: raw stereo frames -> tracked left features with persistent ids, stereo at keyframes.
+
+Pixels are pixels of the *rectified* images (:attr:`ImageFrontEnd.camera`); ids int64, increasing,
+never reused.  Per frame (protocol :class:`~gevi_cli.frontend.FrontEnd`):
+
+- ``track(frame)``: rectify the left image, LK from the previous frame (forward-backward checked),
+  drop the failures.  The first call detects instead.
+- ``keyframe(frame)`` (same frame, after ``track``): detect in the grid cells without a feature
+  (new ids), rectify the right image and match all current features left -> right.  Only the
+  matched ones are returned; the unmatched stay tracked.
+
+State between frames is the previous left image (as a :class:`~gevi_cli.frontend.klt.Pyramid`),
+the ids and pixels, and one number (the previous keyframe's median disparity, the stereo prior).
+Within one frame, identified by ``t_ns``, nothing is computed twice.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from gevi_cli.datasets.calibration import StereoRig
+from gevi_cli.frontend.config import FrontendConfig
+from gevi_cli.frontend.grid import GridDetector
+from gevi_cli.frontend.klt import Pyramid, build_pyramid, track_lk
+from gevi_cli.frontend.rectify import Rectifier
+from gevi_cli.frontend.stereo import match_stereo
+from gevi_cli.frontend.types import FeatureObs, RectifiedStereo, StereoObs
+
+STAGES = ("rectify", "pyramid", "lk", "detect", "stereo")
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False  # handed out without copying: nobody may change our state through it
+    return a
+
+
+class ImageFrontEnd:
+    """:class:`~gevi_cli.frontend.FrontEnd` on raw :class:`~gevi_cli.datasets.StereoFrame` objects.
+
+    ``timings`` maps each stage of :data:`STAGES` to its seconds in the last ``track`` or
+    ``keyframe`` call (0.0 for stages that call did not run).
+    """
+
+    camera: RectifiedStereo
+
+    def __init__(self, rig: StereoRig, cfg: FrontendConfig | None = None):
+        self.cfg = cfg if cfg is not None else FrontendConfig()
+        self.rectifier = Rectifier(rig)
+        self.camera = self.rectifier.camera
+        self._detect = GridDetector(self.cfg)
+        self.ids = _frozen(np.empty(0, np.int64))
+        self.uv = _frozen(np.empty((0, 2)))
+        self._next_id = 0
+        self._t_ns: int | None = None          # stamp of the frame the state describes
+        self._left: Pyramid | None = None      # its rectified left image
+        self._right: Pyramid | None = None     # its rectified right image, made by keyframe() only
+        self._stereo: StereoObs | None = None  # its keyframe result, if keyframe() ran
+        self._disparity_prior: float | None = None
+        self.timings: dict[str, float] = dict.fromkeys(STAGES, 0.0)
+
+    # -- protocol ---------------------------------------------------------------------------------
+    def track(self, frame) -> FeatureObs:
+        """Left features of ``frame`` (rectified pixels) with the ids they had before."""
+        self.timings = dict.fromkeys(STAGES, 0.0)
+        self._track(frame)
+        return FeatureObs(self.ids, self.uv)
+
+    def keyframe(self, frame) -> StereoObs:
+        """Detect in empty cells (new ids), then stereo-match every current feature of ``frame``."""
+        self.timings = dict.fromkeys(STAGES, 0.0)
+        t_ns = self._track(frame)  # no-op when track(frame) ran, as the protocol has it
+        if self._stereo is not None:
+            return self._stereo
+        if self._right is None:  # first, so that a bad right image leaves the state untouched
+            with self._timed("rectify"):
+                right = self.rectifier.right(self._image(frame, "right", t_ns))
+            with self._timed("pyramid"):
+                self._right = build_pyramid(right, self.cfg)
+        with self._timed("detect"):
+            new = self._detect(self._left.image, self.uv)
+        self._add(new)
+        with self._timed("stereo"):
+            uv_r, ok = match_stereo(self._left, self._right, self.uv, self.camera, self.cfg,
+                                    disparity_prior=self._disparity_prior)
+        if ok.any():
+            self._disparity_prior = float(np.median(self.uv[ok, 0] - uv_r[ok, 0]))
+        self._stereo = StereoObs(_frozen(self.ids[ok]), _frozen(self.uv[ok]), _frozen(uv_r[ok]))
+        return self._stereo
+
+    def keyframe_decision(self, frame) -> None:
+        """The back end's keyframe rule decides."""
+        return None
+
+    # -- internals --------------------------------------------------------------------------------
+    def _timed(self, stage: str):
+        return _Timer(self.timings, stage)
+
+    @staticmethod
+    def _image(frame, side: str, t_ns: int) -> np.ndarray:
+        img = getattr(frame, side, None)
+        if img is None:
+            raise ValueError(f"frame t_ns={t_ns}: the {side} image is None (unreadable or missing file)")
+        return img
+
+    def _add(self, uv_new: np.ndarray) -> None:
+        if len(uv_new) == 0:
+            return
+        ids = np.arange(self._next_id, self._next_id + len(uv_new), dtype=np.int64)
+        self._next_id += len(uv_new)
+        self.ids = _frozen(np.concatenate([self.ids, ids]))
+        self.uv = _frozen(np.concatenate([self.uv, uv_new]))
+
+    def _track(self, frame) -> int:
+        """Bring the state to ``frame`` (idempotent per ``t_ns``); returns its stamp."""
+        if frame is None:
+            raise ValueError("frame is None")
+        t_ns = int(frame.t_ns)
+        if t_ns == self._t_ns:
+            return t_ns
+        raw = self._image(frame, "left", t_ns)
+        with self._timed("rectify"):
+            left = self.rectifier.left(raw)
+        with self._timed("pyramid"):
+            pyr = build_pyramid(left, self.cfg)
+        if self._left is None:
+            with self._timed("detect"):
+                first = self._detect(pyr.image, None)
+            self._add(first)
+        elif len(self.uv):
+            with self._timed("lk"):
+                uv, ok = track_lk(self._left, pyr, self.uv, self.cfg)
+            self.ids, self.uv = _frozen(self.ids[ok]), _frozen(uv[ok])
+        self._t_ns, self._left, self._right, self._stereo = t_ns, pyr, None, None
+        return t_ns
+
+
+class _Timer:
+    """Adds the wall time of a ``with`` block to ``timings[stage]`` (seconds)."""
+
+    __slots__ = ("timings", "stage", "t0")
+
+    def __init__(self, timings: dict[str, float], stage: str):
+        self.timings, self.stage = timings, stage
+
+    def __enter__(self):
+        self.t0 = time.perf_counter()
+
+    def __exit__(self, *exc):
+        self.timings[self.stage] += time.perf_counter() - self.t0
+        return False
