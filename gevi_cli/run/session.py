@@ -14,7 +14,7 @@ from pathlib import Path
 from gevi_cli.errors import GeviError
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"
-KIND_CONFIG = {"euroc": "euroc.yaml", "pool": "pool.yaml", "kitti": "kitti.yaml", "ov2slam-tracks": "kitti.yaml",
+KIND_CONFIG = {"euroc": "euroc.yaml", "pool": "pool.yaml", "kitti": "kitti.yaml", "ov2slam-tracks": "kitti-tracks.yaml",
                "rosbag": "euroc.yaml"}
 
 
@@ -228,10 +228,15 @@ def _evaluate(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status, ec
         rpe = r.rpe.trans_rmse if r.rpe is not None else float("nan")
         status.evaluation = {"align": r.align, "ate_m": r.ate.trans_rmse, "rpe_m": rpe,
                              "ate_rot_deg": getattr(r.ate, "rot_rmse_deg", None), "matched": r.association.n_matched}
-        echo(f"ATE {r.ate.trans_rmse:.4f} m, RPE {rpe:.4f} m ({r.align.upper()}, body frame, RPE over "
+        echo(f"ATE {_metres(r.ate.trans_rmse)}, RPE {_metres(rpe)} ({r.align.upper()}, body frame, RPE over "
              f"{cfg.run.rpe_delta:g} frame; {r.association.summary()})")
     else:
         status.evaluation = {"failed": r.reason}
         echo(f"evaluation failed: {r.reason}")
     for w in r.warnings:
         echo(f"gevi: warning: {w}", err=True)
+
+
+def _metres(x: float) -> str:
+    """Metres with 4 significant digits below 10 cm (sub-millimetre runs stay readable)."""
+    return f"{x:.4f} m" if not x < 0.1 else f"{x:.4g} m"
