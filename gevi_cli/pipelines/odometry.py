@@ -119,8 +119,10 @@ class KeyframeOdometry:
         if decision is None:
             decision = self.kf is None or T_ck is None or self._keyframe_rule(res, disp_px if T_ck is not None else 0.0)
         if T_ck is not None and self.kf is not None:
-            # only the verified matches enter the BA: unverified LK tracks carry the outliers
-            self.window.append(WindowFrame(res.index, res.t_ns, self._inliers, invert_pose(T_ck), True))
+            # every tracked feature enters the BA (its robust kernel handles the outliers): measured,
+            # verified-only observations gave KITTI 04 gray ATE 0.417 m instead of 0.349 m
+            self.window.append(WindowFrame(res.index, res.t_ns, est.ImageObs(obs.ids, self.camera.normalize(obs.uv)),
+                                           invert_pose(T_ck), True))
         elif self.kf is not None:
             self.window.append(WindowFrame(res.index, res.t_ns, est.ImageObs(obs.ids, self.camera.normalize(obs.uv)),
                                            invert_pose(self.kf.T_w_k) @ res.T_w_c, False))
@@ -188,7 +190,6 @@ class KeyframeOdometry:
         T_ck = self.estimate_T_ck(m, frame)
         timings["pose"] = time.perf_counter() - t2
         disp_px = float(np.mean(np.linalg.norm(m.q - m.z, axis=1))) * self.camera.f
-        self._inliers = est.ImageObs(m.ids, m.q)
         return T_ck, n_match, len(m.ids), disp_px
 
     def _keyframe_rule(self, res: FrameResult, disp_px: float) -> bool:
