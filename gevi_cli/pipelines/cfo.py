@@ -22,10 +22,12 @@ class CurrentFeatureOdometry(KeyframeOdometry):
     def __init__(self, frontend: FrontEnd, cfg: OdometryConfig):
         super().__init__(frontend, cfg)
         self.verification = FivePointL1Verification(cfg.verify, self.camera)
+        self.fallbacks = 0  # frames whose pose step started from SQPnP instead of Bias-Eli
 
     def estimate_T_ck(self, m: Matches, frame) -> np.ndarray:
         cov = m.cov_unit * self.sigma2
-        R, t = estimate_pose6(m.p, cov, m.q, self.cfg.pnp, self.sigma2)
+        R, t, fallback = estimate_pose6(m.p, cov, m.q, self.cfg.pnp, self.sigma2, self.camera.f)
+        self.fallbacks += int(fallback)
         if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
             raise TrackingFailure("non-finite pose")
         med = reprojection_median_px(R, t, m.p, m.q, self.camera.f)

@@ -59,6 +59,8 @@ class PnPConfig:
     depth_weights: bool = opt(False, "linear-step row weights Z^-3/2 (the authors' code) instead of 1")
     current_noise: bool = opt(False, "add the current-frame noise sigma^2 I to the step's weights (spec 5.4)")
     min_points: int = opt(12, "fewer verified matches than this is a tracking failure")
+    fallback_px: float = opt(2.0, "be-w/ls: above this median reprojection error (px) the step is redone from "
+                                  "SQPnP (the linear model is degenerate for coplanar points); 0: never")
     max_median_px: float = opt(10.0, "a pose whose median reprojection error exceeds this is a failure (px); "
                                            "loose, so ablations without the LM step (be) are not judged by it")
 
@@ -81,7 +83,7 @@ class BAConfig:
     kernel: str = opt("huber", "'huber' (delta = 3 sigma), 'truncated', 'none'")
     max_iter: int = opt(10, "LM iterations")
     tol: float = opt(1e-4, "stop when the relative step or the relative robust-cost decrease is below this")
-    max_window: int = opt(0, "frames between the keyframes used by the BA (evenly thinned; 0: all)")
+    max_features: int = opt(0, "at most this many feature ids in a BA window (evenly thinned; 0: all)")
     max_step_ratio: float = opt(0.5, "reject a BA that moves the new keyframe by more than this fraction of "
                                      "the window's translation plus 5 cm")
 

@@ -57,6 +57,20 @@ def _orthonormal(T: np.ndarray) -> np.ndarray:
     return out
 
 
+def _thin_features(obs: list, cap: int) -> list:
+    """Keep at most ``cap`` feature ids in the window (evenly over the sorted ids: deterministic and
+    spread over detection time, so over the image); every image keeps its observations of those."""
+    ids = np.unique(np.concatenate([o.ids for o in obs]))
+    if len(ids) <= cap:
+        return obs
+    keep = ids[np.linspace(0, len(ids) - 1, cap).round().astype(np.int64)]
+    out = []
+    for o in obs:
+        m = np.isin(o.ids, keep, assume_unique=True)
+        out.append(est.ImageObs(o.ids[m], o.xy[m]))
+    return out
+
+
 def _make_T(R, t) -> np.ndarray:
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, t
@@ -232,9 +246,12 @@ class KeyframeOdometry:
         if not frames or not all(f.ok for f in frames) or frames[-1].index != new.index:
             return None
         T_k = np.array([f.T_kc for f in frames])  # T_K1_Fk, last = the new keyframe
-        window = est.BAWindow(kf.stereo_left, kf.stereo_right, [f.left for f in frames[:-1]], new.stereo_left,
-                              new.stereo_right, T_k[:, :3, :3], T_k[:, :3, 3], self.camera.R_rl, self.camera.t_rl,
-                              sigma=float(np.sqrt(self.sigma2)))
+        obs = [kf.stereo_left, kf.stereo_right] + [f.left for f in frames[:-1]] + [new.stereo_left, new.stereo_right]
+        cap = self.cfg.ba.max_features
+        if cap:
+            obs = _thin_features(obs, cap)
+        window = est.BAWindow(obs[0], obs[1], obs[2:-2], obs[-2], obs[-1], T_k[:, :3, :3], T_k[:, :3, 3],
+                              self.camera.R_rl, self.camera.t_rl, sigma=float(np.sqrt(self.sigma2)))
         try:
             r = est.epipolar_local_ba(window, est.BAOptions(kernel=self.cfg.ba.kernel, max_iter=self.cfg.ba.max_iter,
                                                            tol=self.cfg.ba.tol))

@@ -16,12 +16,36 @@ from gevi_cli.pipelines.config import PnPConfig
 from gevi_cli.pipelines.verification import TrackingFailure
 
 
-def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig, sigma2: float):
-    """``(R_ck, t_ck)``: maps keyframe-left points ``p`` (n, 3, m) onto current normalized ``q`` (n, 2).
+def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig, sigma2: float, f: float = 1.0):
+    """``(R_ck, t_ck, used_fallback)``: maps keyframe-left points ``p`` (n, 3, m) onto current
+    normalized ``q`` (n, 2).
 
     ``cov`` (n, 3, 3) point covariances (normalized-noise units already applied); ``sigma2`` the
-    normalized image-noise variance.  Raises :class:`TrackingFailure`.
+    normalized image-noise variance; ``f`` the focal length (px) for the fallback test.
+
+    The CPnP linear model (spec 5.1) is degenerate for coplanar points (a pool floor seen from
+    above: measured median reprojection errors of 5-13 px after the step on a planar render).  So for
+    ``be-w``/``ls``, when the refined pose's median reprojection error exceeds
+    ``cfg.fallback_px``, the step is redone from SQPnP (spec 5.5 [PROPOSAL]: "any robust PnP
+    followed by LM") and the better of the two is kept.  Raises :class:`TrackingFailure`.
     """
+    R, t = _estimate(p, cov, q, cfg, sigma2)
+    if cfg.method not in ("be-w", "ls") or cfg.fallback_px <= 0:
+        return R, t, False
+    err = reprojection_median_px(R, t, p, q, f)
+    if err <= cfg.fallback_px:
+        return R, t, False
+    try:
+        R2, t2 = _opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False)
+        R2, t2 = est.pnp6_refine(R2, t2, p, cov, q, sigma2_q=sigma2 if cfg.current_noise else 0.0)
+    except (est.EstimatorError, cv2.error, TrackingFailure):
+        return R, t, False
+    if reprojection_median_px(R2, t2, p, q, f) < err:
+        return R2, t2, True
+    return R, t, False
+
+
+def _estimate(p, cov, q, cfg: PnPConfig, sigma2: float):
     try:
         if cfg.method in ("epnp", "sqpnp"):
             return _opencv_pnp(p, q, cv2.SOLVEPNP_EPNP if cfg.method == "epnp" else cv2.SOLVEPNP_SQPNP, refine=True)

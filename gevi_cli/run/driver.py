@@ -18,7 +18,7 @@ from gevi_cli.pipelines.types import BRIDGED
 from gevi_cli.run.folder import PoseStream, RunStatus, write_status
 
 #: timing.csv columns (ms); the front-end sub-stages are part of "frontend" and "keyframe".
-STAGES = ("frontend", "fe_rectify", "fe_pyramid", "fe_lk", "fe_detect", "fe_stereo", "verify", "noise", "pose",
+STAGES = ("read", "frontend", "fe_rectify", "fe_pyramid", "fe_lk", "fe_detect", "fe_stereo", "verify", "noise", "pose",
           "keyframe", "ba")
 
 
@@ -28,14 +28,28 @@ class RunOutcome:
     exit_code: int  # 0 complete, 3 tracking lost on the way
 
 
+def _read(source, i: int):
+    try:
+        return i, source._read_pair(i)
+    except DataError as err:
+        return i, err
+
+
 def _frames(source, start: int, stop: int):
-    """(index, frame or DataError) for indices start..stop-1; unreadable images do not stop a run."""
+    """(index, frame or DataError) for indices start..stop-1; unreadable images do not stop a run.
+
+    Image sequences are read one frame ahead in a thread: image decoding releases the GIL, so on a
+    multi-core machine reading overlaps with tracking (the frames and their order are unchanged).
+    """
     if hasattr(source, "_read_pair"):
-        for i in range(start, stop):
-            try:
-                yield i, source._read_pair(i)
-            except DataError as err:
-                yield i, err
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gevi-read") as pool:
+            ahead = pool.submit(_read, source, start) if start < stop else None
+            for i in range(start, stop):
+                item = ahead.result()
+                ahead = pool.submit(_read, source, i + 1) if i + 1 < stop else None
+                yield item
     else:
         for f in source.frames(start, stop):
             yield f.index, f
@@ -83,7 +97,14 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
     write_status(run_dir, status)
     try:
         k = 0  # index inside the odometry (unreadable frames are skipped, not tracked)
-        for index, frame in _frames(source, start, stop):
+        frames = _frames(source, start, stop)
+        while True:
+            t_read = time.perf_counter()
+            item = next(frames, None)
+            if item is None:
+                break
+            index, frame = item
+            t_read = time.perf_counter() - t_read
             if isinstance(frame, DataError):
                 status.skipped_frames.append({"index": index, "reason": frame.one_line()})
                 warn(f"frame {index} skipped: {frame.one_line()}")
@@ -91,7 +112,8 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
                 continue
             t0 = time.perf_counter()
             res = odometry.track(frame)
-            total = time.perf_counter() - t0
+            res.timings["read"] = t_read
+            total = time.perf_counter() - t0 + t_read
             stamps[res.index] = res.t_ns
             online.append(res.t_ns, T_B_C @ res.T_w_c @ T_C_B)
             emit_final(res.final)
@@ -145,5 +167,6 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
         timing.close()
         frames_csv.close()
         status.elapsed_s = time.perf_counter() - t_run
+        status.pose_fallbacks = int(getattr(odometry, "fallbacks", 0))
         write_status(run_dir, status)
     return RunOutcome(status, 0 if status.state == "ok" else 3)

@@ -70,6 +70,7 @@ class RunStatus:
     frames_done: int = 0
     frames_tracked: int = 0
     keyframes: int = 0
+    pose_fallbacks: int = 0  # frames whose pose step started from SQPnP (coplanar points)
     lost_intervals: list = field(default_factory=list)  # {"start_s", "end_s", "frames", "first_index", "reason"}
     bridged_frames: list = field(default_factory=list)  # frame indices bridged at constant velocity
     skipped_frames: list = field(default_factory=list)  # unreadable frames: {"index", "reason"}
