@@ -71,7 +71,7 @@ def test_run_folder_contract(runs, capsys):
     # exact ns stamps (nominal 10 Hz): second row is 0.1 s
     assert (d / "traj_body.tum").read_text().splitlines()[2].startswith("0.100000000 ")
     timing = (d / "timing.csv").read_text().splitlines()
-    assert timing[0].startswith("index,t_ns,total_ms,frontend_ms") and len(timing) == 272
+    assert timing[0].startswith("index,t_ns,total_ms,read_ms,frontend_ms") and len(timing) == 272
     # gevi eval on the run folder evaluates the primary trajectory and gives the run's own numbers
     gt = shared_path("cfo_kitti04") / "data/gt_poses/kitti_gt_pose/04.txt"
     code, out, err = run_cli(["eval", "-e", f"cfo={d}", "--gt", gt, "-o", d.parent / "ev"], capsys)
