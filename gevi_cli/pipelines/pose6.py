@@ -29,19 +29,28 @@ def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig
     ``cfg.fallback_px``, the step is redone from SQPnP (spec 5.5 [PROPOSAL]: "any robust PnP
     followed by LM") and the better of the two is kept.  Raises :class:`TrackingFailure`.
     """
-    R, t = _estimate(p, cov, q, cfg, sigma2)
     if cfg.method not in ("be-w", "ls") or cfg.fallback_px <= 0:
+        R, t = _estimate(p, cov, q, cfg, sigma2)
         return R, t, False
-    err = reprojection_median_px(R, t, p, q, f)
+    try:
+        R, t = _estimate(p, cov, q, cfg, sigma2)
+        err = reprojection_median_px(R, t, p, q, f)
+        first_failure = None
+    except TrackingFailure as failure:  # e.g. the step from a degenerate linear start put points behind
+        R = t = None
+        err, first_failure = float("inf"), failure
     if err <= cfg.fallback_px:
         return R, t, False
     try:
         R2, t2 = _opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False)
         R2, t2 = est.pnp6_refine(R2, t2, p, cov, q, sigma2_q=sigma2 if cfg.current_noise else 0.0)
+        err2 = reprojection_median_px(R2, t2, p, q, f)
     except (est.EstimatorError, cv2.error, TrackingFailure):
-        return R, t, False
-    if reprojection_median_px(R2, t2, p, q, f) < err:
+        err2 = float("inf")
+    if err2 < err:
         return R2, t2, True
+    if first_failure is not None:
+        raise first_failure
     return R, t, False
 
 
