@@ -26,7 +26,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
 EPILOG = """\b
 Examples:
   gevi info datasets/euroc/V1_01_easy
-  gevi info ../shared/data/euroc_micro --groundtruth ../shared/data/euroc_micro/groundtruth/V1_01_easy.csv
+  gevi info ../shared/data/euroc_micro --gt ../shared/data/euroc_micro/groundtruth/V1_01_easy.csv
   gevi convert estimate.csv estimate.tum --to tum
   gevi simulate --sample
   gevi eval --gt groundtruth.csv -e ours=traj.tum -e orbslam3=f_dataset.txt

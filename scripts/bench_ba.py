@@ -5,7 +5,7 @@ iterations; 1 px noise, start with 8 % scale error + 0.3 deg + 2 cm) for K = 3, 
 100 / 200 features, and ms per ``preintegrate`` of 0.1 s at 200 Hz (20 samples), plus the batched
 form over 30 such intervals. The window simulator is ``gevi_cli.estimators.simulation.ba_window``.
 
-    /work/venv/bin/python scripts/bench_ba.py [--repeat 5] [--scipy]
+    python scripts/bench_ba.py [--repeat 5] [--scipy]
 """
 
 from __future__ import annotations

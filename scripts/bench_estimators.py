@@ -2,7 +2,7 @@
 
 Target (issue 3): 4-DOF BE+GN and Bias-Eli-W + refine each under 1 ms at n = 200.
 
-    /work/venv/bin/python scripts/bench_estimators.py [--repeat 200] [--out DIR]
+    python scripts/bench_estimators.py [--repeat 200] [--out DIR]
 """
 
 from __future__ import annotations

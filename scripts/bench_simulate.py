@@ -5,9 +5,9 @@ Default: the acceptance case, a 20 s pool-easy sequence at 10 Hz, 640x360, EuRoC
 <= 30 s on a 2-core machine).  ``--examples DIR`` also writes one downscaled left image per preset
 (``DIR/sim_<preset>.png``, the README pictures).
 
-    /work/venv/bin/python scripts/bench_simulate.py
-    /work/venv/bin/python scripts/bench_simulate.py --preset kitti-like --format kitti --duration 10
-    /work/venv/bin/python scripts/bench_simulate.py --examples docs/img --skip-bench
+    python scripts/bench_simulate.py
+    python scripts/bench_simulate.py --preset kitti-like --format kitti --duration 10
+    python scripts/bench_simulate.py --examples docs/img --skip-bench
 """
 from __future__ import annotations
 

@@ -5,7 +5,7 @@ with the BE covariance (``pnp4_gn(..., be_cov=...)``: BE kept where cost (1) is 
 6-DOF Bias-Eli-W + one weighted step, OpenCV EPnP and SQPnP (on the triangulated points,
 identity K, normalized coordinates); CRLB4 (root-mean rule of spec 11.1).
 
-    /work/venv/bin/python scripts/fig4_consistency.py [--quick] [--runs 700] [--out DIR]
+    python scripts/fig4_consistency.py [--quick] [--runs 700] [--out DIR]
 """
 
 from __future__ import annotations

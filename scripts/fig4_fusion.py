@@ -9,7 +9,7 @@ random-walk bias (corrected with an estimate that is off by N(0, (1e-4 rad/s)^2)
 0.2 s windows; vision: spec-11.3 scene (f = 1100, 2.5 px on all images, b = 0.2 m, n = 200) for the
 true relative pose of each window, forward-looking camera.
 
-    /work/venv/bin/python scripts/fig4_fusion.py [--quick] [--duration 150] [--seed 0] [--out DIR]
+    python scripts/fig4_fusion.py [--quick] [--duration 150] [--seed 0] [--out DIR]
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@
 10-30 % outliers (q replaced by uniform image points), 400 trials, n = 200, roll/pitch prior
 noise 0.2 deg, Sampson threshold 3 sigma, RANSAC confidence 0.99 for both.
 
-    /work/venv/bin/python scripts/fig4_ransac.py [--trials 400] [--quick] [--out DIR]
+    python scripts/fig4_ransac.py [--trials 400] [--quick] [--out DIR]
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Estimators of GeVI-SLAM and Bias-Eliminated PnP as pure numpy functions.
 
-See ``/work/shared/docs/estimators.md`` (the spec) and ``docs/estimators_notes.md`` (choices made
+See ``docs/method.md`` (the method as implemented) and ``docs/estimators_notes.md`` (choices made
 where the spec left a gap, measured numbers). Conventions (spec section 1): normalized image
 coordinates (n, 2); ``(R_ck, t_ck)`` maps keyframe-left coordinates into current-left
 (``X_C = R_ck X_K + t_ck``, metres); stereo extrinsic ``X_R = R_rl X_L + t_rl``; the 4-DOF
