@@ -80,9 +80,12 @@ class BAConfig:
     """Epipolar local BA over the last two keyframes and the frames between (spec 10)."""
 
     enabled: bool = opt(True, "run the BA at each keyframe insertion")
-    kernel: str = opt("huber", "'huber' (delta = 3 sigma), 'truncated', 'none'")
+    kernel: str = opt("truncated", "'truncated' (the authors' choice) or 'huber' (delta = 3 sigma in both), 'none'")
     max_iter: int = opt(10, "LM iterations")
     tol: float = opt(1e-4, "stop when the relative step or the relative robust-cost decrease is below this")
+    max_reproj_ratio: float = opt(1.5, "reject a BA whose new-keyframe pose reprojects the keyframe points with a "
+                                       "median error above ratio x the tracking pose's + 0.05 px (0: never)")
+    max_gap: int = opt(0, "frame-frame pairs F_j -> F_k only for j - k <= this (0: all j > k, the authors' pairs)")
     max_features: int = opt(0, "at most this many feature ids in a BA window (evenly thinned; 0: all)")
     max_step_ratio: float = opt(0.5, "reject a BA that moves the new keyframe by more than this fraction of "
                                      "the window's translation plus 5 cm")

@@ -25,6 +25,7 @@ from gevi_cli.geometry import invert_pose
 from gevi_cli.pipelines.config import OdometryConfig
 from gevi_cli.pipelines.keyframe import Keyframe, make_keyframe
 from gevi_cli.pipelines.types import BRIDGED, OK, FrameResult
+from gevi_cli.pipelines.pose6 import reprojection_median_px
 from gevi_cli.pipelines.verification import TrackingFailure
 
 
@@ -95,6 +96,8 @@ class KeyframeOdometry:
         self.T_w_last: np.ndarray | None = None
         self.velocity = np.eye(4)  # T_{prev,cur} of the last tracked step
         self.verification = None
+        self._last = None  # (p, q) of the last tracked frame's verified matches
+        self.ba_rejected = 0
 
     # ------------------------------------------------------------------ to be provided by pipelines
     def estimate_T_ck(self, m: Matches, frame) -> np.ndarray:  # pragma: no cover - abstract
@@ -204,6 +207,7 @@ class KeyframeOdometry:
         T_ck = self.estimate_T_ck(m, frame)
         timings["pose"] = time.perf_counter() - t2
         disp_px = float(np.mean(np.linalg.norm(m.q - m.z, axis=1))) * self.camera.f
+        self._last = (m.p, m.q)
         return T_ck, n_match, len(m.ids), disp_px
 
     def _keyframe_rule(self, res: FrameResult, disp_px: float) -> bool:
@@ -254,7 +258,7 @@ class KeyframeOdometry:
                               self.camera.R_rl, self.camera.t_rl, sigma=float(np.sqrt(self.sigma2)))
         try:
             r = est.epipolar_local_ba(window, est.BAOptions(kernel=self.cfg.ba.kernel, max_iter=self.cfg.ba.max_iter,
-                                                           tol=self.cfg.ba.tol))
+                                                           tol=self.cfg.ba.tol, max_gap=self.cfg.ba.max_gap))
         except est.EstimatorError:
             return None
         t_track, t_ba = T_k[-1, :3, 3], r.t[-1]
@@ -262,6 +266,19 @@ class KeyframeOdometry:
         if (not np.all(np.isfinite(r.t)) or r.rms_final > r.rms_initial * 1.5
                 or np.linalg.norm(t_ba - t_track) > self.cfg.ba.max_step_ratio * span + 0.05):
             return None
+        if self.cfg.ba.max_reproj_ratio > 0 and self._last is not None:
+            # Cross-check with the tracking cost: the BA (epipolar distances) must not make the keyframe
+            # points reproject much worse in the new keyframe than the PnP pose did.  Windows whose
+            # tracks are dominated by LK errors (fast motion blur) otherwise pull the poses off.
+            p, q = self._last
+            f = self.camera.f
+            T_ck_ba = invert_pose(_make_T(r.R[-1], r.t[-1]))
+            T_ck_tr = invert_pose(T_k[-1])
+            e_ba = reprojection_median_px(T_ck_ba[:3, :3], T_ck_ba[:3, 3], p, q, f)
+            e_tr = reprojection_median_px(T_ck_tr[:3, :3], T_ck_tr[:3, 3], p, q, f)
+            if e_ba > self.cfg.ba.max_reproj_ratio * e_tr + 0.05:
+                self.ba_rejected += 1
+                return None
         refined = {f.index: kf.T_w_k @ _make_T(r.R[i], r.t[i]) for i, f in enumerate(frames)}
         self.pending = [(i, refined.get(i, T)) for i, T in self.pending]
         return refined[new.index]
