@@ -64,3 +64,16 @@ def test_eval_reads_a_results_tree_of_run_folders(render, tmp_path, capsys):
     metrics = json.loads((tmp_path / "ev" / "metrics.json").read_text())
     paths = {r["path"] for r in metrics["results"]}
     assert len(paths) == 2 and all(p.endswith("traj_body.tum") for p in paths)
+
+
+def test_start_and_max_frames_count_frames(render, tmp_path, capsys):
+    from gevi_cli.datasets import open_sequence
+    from gevi_cli.trajectory import read_trajectory
+
+    code, _, err = run_cli(["run", render, "--start", "10", "--max-frames", "15", "-o", tmp_path / "r", "-q"], capsys)
+    assert code == 0, err
+    est = read_trajectory(tmp_path / "r" / "traj_body.tum")
+    stamps = open_sequence(render).stamps_ns
+    assert list(est.t_ns) == list(stamps[10:25])
+    code, _, err = run_cli(["run", render, "--start", "99", "-q", "-o", tmp_path / "x"], capsys)
+    assert code == 2 and "--start" in err
