@@ -3,7 +3,7 @@
 Prints the median ms per ``epipolar_local_ba`` call (default options: Huber, built-in LM, 10
 iterations; 1 px noise, start with 8 % scale error + 0.3 deg + 2 cm) for K = 3, 5, 8 frames and
 100 / 200 features, and ms per ``preintegrate`` of 0.1 s at 200 Hz (20 samples), plus the batched
-form over 30 such intervals. The window simulator is ``gevi_cli.estimators.simulation.ba_window``.
+form over 30 such intervals. The window simulator is ``gevi_cli.studies.simulation.ba_window``.
 
     python scripts/bench_ba.py [--repeat 5] [--scipy]
 """
@@ -17,7 +17,7 @@ import numpy as np
 
 from gevi_cli.estimators.epipolar_ba import BAOptions, epipolar_local_ba
 from gevi_cli.estimators.preintegration import preintegrate, preintegrate_batch
-from gevi_cli.estimators.simulation import ba_window, perturb_ba_window
+from gevi_cli.studies.simulation import ba_window, perturb_ba_window
 
 
 def _median_ms(fn, repeat):

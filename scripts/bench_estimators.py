@@ -15,8 +15,8 @@ import numpy as np
 import pandas as pd
 
 from gevi_cli import estimators as est
-from gevi_cli.estimators import simulation as sim
 from gevi_cli.estimators.pnp4 import pnp4_be_cov
+from gevi_cli.studies import simulation as sim
 
 
 def main():

@@ -28,13 +28,11 @@ from pathlib import Path
 import numpy as np
 
 from gevi_cli import estimators as est
-from gevi_cli.estimators import simulation as sim
 from gevi_cli.estimators.pnp6 import build_H, l1_regression, pnp_l1_filter
+from gevi_cli.studies import simulation as sim
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from cfo_kitti04 import BASELINE, DATA, FX, normalized, read_blocks  # noqa: E402
-
-FOLDER = {"gray": "ov2slam_data_kitti_04_gray", "color": "ov2slam_data_kitti_04"}
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "cfo_kitti04"
+FOLDER = {"gray": ("ov2slam_data_kitti_04_gray", "gray_calib.txt"), "color": ("ov2slam_data_kitti_04", "colour_calib.txt")}
 
 
 def synthetic(n, rng):
@@ -48,25 +46,25 @@ def synthetic(n, rng):
 
 
 def kitti04_frames(cameras, min_depth=0.5, max_depth=40.0):
-    folder = DATA / "data" / "ov2slam_data" / FOLDER[cameras]
-    if not folder.is_dir():
+    """(frame, p, q) per frame of the export: keyframe points (depth gate) matched by id to the
+    frame's tracks that OV2SLAM kept (its outlier flag 0), through the pipeline's own reader."""
+    from gevi_cli.datasets.track_export import open_track_export
+    from gevi_cli.frontend.export import ExportFrontEnd
+    from gevi_cli.pipelines.keyframe import make_keyframe
+
+    folder, calib = FOLDER[cameras]
+    if not (DATA / "data" / "ov2slam_data" / folder).is_dir():
         return None
-    tracks = read_blocks(folder / "ov2slam_pnp_data_seq04.txt", 8)
-    b = BASELINE[cameras]
-    keyframes = {}
-    for kf_id, lx, ly, rx, ry, ids in read_blocks(folder / "ov2slam_stereo_matches.txt", 6):
-        depth = FX * b / np.maximum(lx - rx, 1e-9)
-        gate = (depth > min_depth) & (depth < max_depth)
-        p, _ = est.triangulate(normalized(lx, ly)[gate], normalized(rx, ry)[gate], np.eye(3),
-                               np.array([-b, 0.0, 0.0]), 1.0)
-        keyframes[int(kf_id[0])] = (ids[gate].astype(np.int64), p)
-    kf_ids = sorted(keyframes)
-    frames = []
-    for f, (x, y, _, _, _, _, ids, flag) in enumerate(tracks, start=1):
-        kid, p = keyframes[max(i for i in kf_ids if i < f)]
-        good = flag == 0
-        _, i_kf, i_tr = np.intersect1d(kid, ids[good].astype(np.int64), return_indices=True)
-        frames.append((f, p[i_kf], normalized(x[good][i_tr], y[good][i_tr])))
+    export = open_track_export(DATA / "data" / "ov2slam_data" / folder, DATA / "calib" / calib)
+    fe = ExportFrontEnd(export, use_outlier_flags=True)
+    frames, kf = [], None
+    for frame in export.frames():
+        obs = fe.track(frame)
+        if kf is not None:
+            _, i_kf, i_tr = np.intersect1d(kf.ids, obs.ids, return_indices=True)
+            frames.append((frame.index, kf.p[i_kf], fe.camera.normalize(obs.uv[i_tr])))
+        if frame.stereo is not None:
+            kf = make_keyframe(frame.index, frame.t_ns, np.eye(4), fe.keyframe(frame), fe.camera, min_depth, max_depth)
     return frames
 
 

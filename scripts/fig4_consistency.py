@@ -24,9 +24,9 @@ import pandas as pd  # noqa: E402
 
 from gevi_cli.estimators import EstimatorError, pnp4_gn, pnp6_be, pnp6_refine  # noqa: E402
 from gevi_cli.estimators.pnp4 import pnp4_be_cov  # noqa: E402
-from gevi_cli.estimators import montecarlo as mc  # noqa: E402
 from gevi_cli.estimators.lie import wrap_angle  # noqa: E402
-from gevi_cli.estimators.outlier_study import yaw_of  # noqa: E402
+from gevi_cli.studies import montecarlo as mc  # noqa: E402
+from gevi_cli.studies.outlier_study import yaw_of  # noqa: E402
 
 NS = [3, 5, 10, 20, 50, 100, 200, 500, 1000]
 NAN = (np.nan, np.full(3, np.nan))

@@ -26,7 +26,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from gevi_cli.estimators import simulation as sim  # noqa: E402
+from gevi_cli.studies import simulation as sim  # noqa: E402
 
 LABELS = {"adaptive": "adaptive BCD (ours)", "fixed": "fixed weight Σ = λ_lo I", "vision": "vision-only chaining"}
 

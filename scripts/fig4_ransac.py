@@ -19,7 +19,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from gevi_cli.estimators.outlier_study import run_study  # noqa: E402
+from gevi_cli.studies.outlier_study import run_study  # noqa: E402
 
 RATIOS = [0.1, 0.2, 0.3]
 

@@ -18,6 +18,7 @@ import numpy as np
 
 from gevi_cli.geometry import invert_pose, make_T
 from gevi_cli.simulate.camera import CameraModel, RenderRig
+from gevi_cli.simulate.constants import MOCAP_NOISE_POS_M, MOCAP_NOISE_ROT_DEG, MOCAP_RATE_HZ
 from gevi_cli.simulate.imu import ImuParams, ImuSeries, synthesize_imu
 from gevi_cli.simulate.motion import MotionSample
 from gevi_cli.simulate.presets import (
@@ -32,9 +33,6 @@ from gevi_cli.simulate.scenes import build_scene
 
 #: stamp of the first sample (2023-11-14 22:13:20 UTC), an EuRoC-like epoch time in ns
 T0_NS = 1_700_000_000_000_000_000
-MOCAP_RATE_HZ = 100.0
-MOCAP_NOISE_POS_M = 0.0005
-MOCAP_NOISE_ROT_DEG = 0.1
 
 
 @dataclass(frozen=True)

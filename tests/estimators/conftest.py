@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from gevi_cli.estimators import simulation as sim
+from gevi_cli.studies import simulation as sim
 
 
 @pytest.fixture

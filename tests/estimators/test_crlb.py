@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from gevi_cli.estimators import DegenerateInput, crlb4, crlb6, fisher6, triangulate
-from gevi_cli.estimators import simulation as sim
 from gevi_cli.estimators.lie import project_jacobian, skew
+from gevi_cli.studies import simulation as sim
 
 
 def test_fisher6_equals_raw_stereo_model(rng):

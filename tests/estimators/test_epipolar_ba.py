@@ -19,9 +19,9 @@ from gevi_cli.estimators.epipolar_ba import (
     poses_from_tracking,
 )
 from gevi_cli.estimators.lie import rotation_error
-from gevi_cli.estimators.simulation import R_RL, T_RL
-from gevi_cli.estimators.simulation import ba_window as make_window
-from gevi_cli.estimators.simulation import perturb_ba_window as perturb
+from gevi_cli.studies.simulation import R_RL, T_RL
+from gevi_cli.studies.simulation import ba_window as make_window
+from gevi_cli.studies.simulation import perturb_ba_window as perturb
 
 
 def pose_errors(R, t, R_true, t_true):

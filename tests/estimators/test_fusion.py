@@ -43,7 +43,6 @@ def test_sigma_step_bad_bounds():
 # ------------------------------------------------------------------------------------------------
 # bcd_refine (spec 8.1-8.3)
 
-from gevi_cli.estimators import simulation as sim  # noqa: E402
 from gevi_cli.estimators import triangulate  # noqa: E402
 from gevi_cli.estimators.fusion import (  # noqa: E402
     FusionState,
@@ -55,6 +54,7 @@ from gevi_cli.estimators.fusion import (  # noqa: E402
     joint_cost,
     propagate_tilts,
 )
+from gevi_cli.studies import simulation as sim  # noqa: E402
 
 
 def _window(seed=3, noise=True, t0_err=0.0):

@@ -17,7 +17,7 @@ from gevi_cli.estimators.initialization import (
     stereo_imu_init,
 )
 from gevi_cli.estimators.lie import exp_so3
-from gevi_cli.estimators.simulation import G_W, R_IC_FORWARD, SinTraj
+from gevi_cli.studies.simulation import G_W, R_IC_FORWARD, SinTraj
 
 RATE = 200
 DT_NS = 5_000_000

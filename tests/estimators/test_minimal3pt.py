@@ -4,13 +4,13 @@ import pytest
 from gevi_cli.estimators import (
     DegenerateInput,
     ShapeError,
-    outlier_study,
     ransac_3pt_upright,
     ransac_iterations,
     solve_3pt_upright,
 )
-from gevi_cli.estimators import simulation as sim
 from gevi_cli.estimators.lie import homogeneous, rot_z, wrap_angle
+from gevi_cli.studies import outlier_study
+from gevi_cli.studies import simulation as sim
 
 
 @pytest.mark.parametrize("fwd", [False, True])

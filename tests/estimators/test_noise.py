@@ -7,7 +7,7 @@ from gevi_cli.estimators import (
     sigma2_stereo,
     sigma2_symmetric,
 )
-from gevi_cli.estimators import simulation as sim
+from gevi_cli.studies import simulation as sim
 
 SIG = 2.5 / 1100.0
 

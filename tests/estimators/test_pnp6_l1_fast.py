@@ -23,9 +23,9 @@ from gevi_cli.estimators import (
     pnp6_l1,
     triangulate,
 )
-from gevi_cli.estimators import simulation as sim
 from gevi_cli.estimators.lie import project
 from gevi_cli.estimators.pnp6 import l1_regression, pnp6_l1_irls, pnp_l1_filter
+from gevi_cli.studies import simulation as sim
 
 POSE_TOL = 1e-7
 

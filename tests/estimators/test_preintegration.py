@@ -14,7 +14,7 @@ from gevi_cli.estimators.preintegration import (
     preintegrate_batch,
     preintegrate_reference,
 )
-from gevi_cli.estimators.simulation import G_W, SinTraj
+from gevi_cli.studies.simulation import G_W, SinTraj
 
 
 def _relative_truth(tr, t0, t1):

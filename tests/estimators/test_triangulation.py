@@ -7,7 +7,7 @@ from gevi_cli.estimators import (
     triangulate,
     triangulate_jacobian,
 )
-from gevi_cli.estimators import simulation as sim
+from gevi_cli.studies import simulation as sim
 
 
 def test_noise_free_recovery(scene4):

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from gevi_cli.geometry import matrix_to_quat_wxyz
+from gevi_cli.simulate.constants import MOCAP_RATE_HZ
 from gevi_cli.simulate.writers import fmt, write_png, write_simulation_yaml
 
 IMU_HEADER = ("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
@@ -133,8 +134,6 @@ def write_euroc(seq, out: Path, progress: bool = True, workers: int | None = Non
     _write_rows(mav / "state_groundtruth_estimate0" / "data.csv", GT_HEADER, imu.t_ns,
                 np.hstack([gt.p_W, q, gt.v_W, imu.bias_gyro, imu.bias_acc]))
     if seq.spec.mocap:
-        from gevi_cli.simulate.generate import MOCAP_RATE_HZ
-
         (mav / "mocap0").mkdir(exist_ok=True)
         t_m, T_m = seq.mocap
         (mav / "mocap0" / "sensor.yaml").write_text(mocap_yaml(seq.T_B_M, MOCAP_RATE_HZ))

@@ -8,11 +8,12 @@ import time
 
 import numpy as np
 
-from . import pnp4, simulation as sim
-from .lie import wrap_angle
-from .minimal3pt import ransac_3pt_upright
-from .montecarlo import perturb_levelling
-from .triangulation import triangulate
+from gevi_cli.estimators import pnp4
+from gevi_cli.estimators.lie import wrap_angle
+from gevi_cli.estimators.minimal3pt import ransac_3pt_upright
+from gevi_cli.estimators.triangulation import triangulate
+from gevi_cli.studies import simulation as sim
+from gevi_cli.studies.montecarlo import perturb_levelling
 
 
 def yaw_of(R, L_k, L_c):

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .lie import exp_so3, project, rot_x, rot_y, rot_z, rtilt
+from gevi_cli.estimators.lie import exp_so3, project, rot_x, rot_y, rot_z, rtilt
 
 F_PX = 1100.0
 IMAGE = 800
@@ -206,7 +206,7 @@ def fusion_trajectory(rng, duration=150.0, rate=100.0, sigma_a=0.02, sigma_g=1.0
     pos[1:] = np.cumsum(0.5 * (vel[1:] + vel[:-1]) * dt, axis=0)
     f_true = np.einsum("nji,nj->ni", R_wi, acc_w + np.array([0.0, 0.0, GRAVITY]))
     f_meas = f_true + sigma_a * rng.standard_normal(f_true.shape)
-    from .lie import log_so3
+    from gevi_cli.estimators.lie import log_so3
 
     omega = log_so3(np.swapaxes(R_wi[:-1], 1, 2) @ R_wi[1:]) / dt
     b_g = np.asarray(b_g0, float) + np.cumsum(bias_rw * np.sqrt(dt) * rng.standard_normal((N - 1, 3)), axis=0)
@@ -252,12 +252,12 @@ def run_fusion(traj: FusionTrajectory, rng, n=200, window=0.2, R_ic=None, modes=
     spec-9 initialisation; with 0.5 deg at |a| = 0.5 m/s^2 the first window locks onto the
     accelerometer direction, see docs/estimators_notes.md).
     """
-    from .fusion import FusionWindow, bcd_refine, propagate_tilts
-    from .lie import levelling
-    from .lie import tilt_angles as _tilt
-    from .pnp4 import pnp4_be, pnp4_gn
-    from .pnp6 import pnp6_be, pnp6_refine
-    from .triangulation import triangulate
+    from gevi_cli.estimators.fusion import FusionWindow, bcd_refine, propagate_tilts
+    from gevi_cli.estimators.lie import levelling
+    from gevi_cli.estimators.lie import tilt_angles as _tilt
+    from gevi_cli.estimators.pnp4 import pnp4_be, pnp4_gn
+    from gevi_cli.estimators.pnp6 import pnp6_be, pnp6_refine
+    from gevi_cli.estimators.triangulation import triangulate
 
     R_ic = R_IC_FORWARD if R_ic is None else np.asarray(R_ic, float)
     lo = (traj.sigma_a / GRAVITY) ** 2 if lo is None else lo
@@ -372,7 +372,7 @@ def ba_window(seed, K=5, n=150, sigma_px=0.0, drop=0.1):
     each feature is dropped from each image with probability ``drop`` (and only kept where it
     projects inside the 800x800 image at f = 1100); ids shuffled per image.  Poses are frame-in-KF1.
     """
-    from .epipolar_ba import BAWindow, ImageObs, euler_zyx
+    from gevi_cli.estimators.epipolar_ba import BAWindow, ImageObs, euler_zyx
 
     HALF = IMAGE / 2 / F_PX
     rng = np.random.default_rng(seed)

@@ -9,10 +9,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import crlb as _crlb
-from . import pnp4, pnp6, simulation as sim
-from .lie import rotation_error, rtilt, tilt_angles, wrap_angle
-from .triangulation import triangulate
+from gevi_cli.estimators import crlb as _crlb
+from gevi_cli.estimators import pnp4, pnp6
+from gevi_cli.estimators.lie import rotation_error, rtilt, tilt_angles, wrap_angle
+from gevi_cli.estimators.triangulation import triangulate
+from gevi_cli.studies import simulation as sim
 
 
 @dataclass
@@ -63,7 +64,7 @@ def run4(n, runs, seed=0, R_ic=None, rows="orth", noisy_rp_deg=None, extra=None,
     dict name -> (yaw_err, t_err)) for the scripts' baselines. With ``nan_on_failure`` an
     EstimatorError in one estimator records NaN for it (tiny n); otherwise it propagates.
     """
-    from .errors import EstimatorError
+    from gevi_cli.estimators.errors import EstimatorError
 
     def safe(fn, *a):
         if not nan_on_failure:
