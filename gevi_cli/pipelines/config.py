@@ -59,8 +59,10 @@ class PnPConfig:
     depth_weights: bool = opt(False, "linear-step row weights Z^-3/2 (the authors' code) instead of 1")
     current_noise: bool = opt(False, "add the current-frame noise sigma^2 I to the step's weights (spec 5.4)")
     min_points: int = opt(12, "fewer verified matches than this is a tracking failure")
-    fallback_px: float = opt(2.0, "be-w/ls: above this median reprojection error (px) the step is redone from "
-                                  "SQPnP (the linear model is degenerate for coplanar points); 0: never")
+    fallback_sigmas: float = opt(4.0, "be-w/ls: when the median reprojection error after the step exceeds this many "
+                                      "noise std (the linear model is degenerate for coplanar points), the step is "
+                                      "redone from SQPnP and the better pose kept; 0: never")
+    fallback_min_px: float = opt(0.5, "... but never below this error (px)")
     max_median_px: float = opt(10.0, "a pose whose median reprojection error exceeds this is a failure (px); "
                                            "loose, so ablations without the LM step (be) are not judged by it")
 

@@ -26,10 +26,11 @@ def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig
     The CPnP linear model (spec 5.1) is degenerate for coplanar points (a pool floor seen from
     above: measured median reprojection errors of 5-13 px after the step on a planar render).  So for
     ``be-w``/``ls``, when the refined pose's median reprojection error exceeds
-    ``cfg.fallback_px``, the step is redone from SQPnP (spec 5.5 [PROPOSAL]: "any robust PnP
+    ``cfg.fallback_sigmas`` times the image noise (at least ``cfg.fallback_min_px``), the step is
+    redone from SQPnP (spec 5.5 [PROPOSAL]: "any robust PnP
     followed by LM") and the better of the two is kept.  Raises :class:`TrackingFailure`.
     """
-    if cfg.method not in ("be-w", "ls") or cfg.fallback_px <= 0:
+    if cfg.method not in ("be-w", "ls") or cfg.fallback_sigmas <= 0:
         R, t = _estimate(p, cov, q, cfg, sigma2)
         return R, t, False
     try:
@@ -39,7 +40,9 @@ def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig
     except TrackingFailure as failure:  # e.g. the step from a degenerate linear start put points behind
         R = t = None
         err, first_failure = float("inf"), failure
-    if err <= cfg.fallback_px:
+    # median |r| of 2-D Gaussian noise is 1.18 sigma: well above that the step has not converged
+    limit = max(cfg.fallback_sigmas * np.sqrt(sigma2) * f, cfg.fallback_min_px)
+    if err <= limit:
         return R, t, False
     try:
         R2, t2 = _opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False)
