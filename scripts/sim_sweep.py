@@ -20,7 +20,7 @@ mean over the seeds of each variant and the two checks:
     (2) be-w ATE  < no-ba ATE  (after-BA vs no-BA trajectory, mean over the seeds of the preset)
 
 Every finished run folder's online trajectory ``traj_online_body.tum`` (each frame's pose as tracked,
-before any BA; the primary ``traj_body.tum`` is after BA) is evaluated too (unless ``--no-online``),
+as tracked, chained from keyframe poses that earlier BAs refined; the primary ``traj_body.tum`` is after BA) is evaluated too (unless ``--no-online``),
 
     gevi eval --gt SEQ -e online=RUN/traj_online_body.tum --align se3 --no-plots --no-kitti -o OUT/online/<sequence>/<variant>
 
@@ -280,7 +280,7 @@ ONLINE = "traj_online_body.tum"
 
 
 def eval_online(rec: dict, seq_path: Path, eval_dir: Path, align: str) -> dict | None:
-    """`gevi eval` of the run folder's online (before-BA) trajectory ``traj_online_body.tum``.
+    """`gevi eval` of the run folder's online (as-tracked) trajectory ``traj_online_body.tum``.
 
     The same metrics as the run's own evaluation of its primary (body frame, RPE over 1 frame); the
     default --min-coverage 0.9 applies (a run bridges lost frames, so its coverage is that of its frames).
@@ -501,7 +501,7 @@ def render_markdown(records: list[dict], seqs: list[tuple[str, Path]], variants:
     lines += ["", "† status.json state `lost-tracking`: tracking lost at least once, lost frames bridged at constant velocity; "
               "the numbers are of that trajectory."]
     if online_cols:
-        lines += ["", f"online: `{ONLINE}` (each frame's pose when it was tracked, before any BA), "
+        lines += ["", f"online: `{ONLINE}` (each frame's pose when it was tracked, as tracked, chained from keyframe poses that earlier BAs refined), "
                   "`gevi eval --align se3`, same metrics as the after-BA columns."]
     lines += ["pose fallbacks: status.json `pose_fallbacks`.",
               "elapsed s: status.json `elapsed_s` (odometry only, without loading and evaluation).", ""]
@@ -596,7 +596,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="sim_baselines folder: add ORB-SLAM3 stereo columns for sequences it holds")
     og = ap.add_mutually_exclusive_group()
     og.add_argument("--online", nargs="?", const="", default="", metavar="VARIANTS",
-                    help=f"variants whose online (before-BA) trajectory {ONLINE} is evaluated (`gevi eval "
+                    help=f"variants whose online (as-tracked) trajectory {ONLINE} is evaluated (`gevi eval "
                          "--align se3`, into OUT/online/) and tabulated (default: all of --variants)")
     og.add_argument("--no-online", action="store_true", help=f"do not evaluate the online trajectories {ONLINE}")
     ap.add_argument("--code-dir", type=Path, default=None, metavar="DIR",

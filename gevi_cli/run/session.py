@@ -188,8 +188,9 @@ def execute(req: RunRequest, echo=print) -> int:
     fps = st.frames_done / st.elapsed_s if st.elapsed_s > 0 else float("nan")
     echo(f"{st.frames_tracked}/{st.frames_done} frames tracked, {st.keyframes} keyframes, "
          f"{st.elapsed_s:.2f} s ({fps:.1f} frames/s)")
+    t0_s = int(source.stamps_ns[req.start]) * 1e-9
     for iv in st.lost_intervals[:5]:
-        echo(f"tracking lost at {iv['start_s']:.3f} s (frame {iv['first_index']}, {iv['frames']} frame(s) bridged): "
+        echo(f"tracking lost at {iv['start_s'] - t0_s:.3f} s (frame {iv['first_index']}, {iv['frames']} frame(s) bridged): "
              f"{iv['reason']}")
     if len(st.lost_intervals) > 5:
         echo(f"... and {len(st.lost_intervals) - 5} more loss(es); see status.json and frames.csv")
