@@ -56,6 +56,8 @@ class PnPConfig:
 
     method: str = opt("be-w", "'be-w' (Bias-Eli + weighted LM step), 'be' (Bias-Eli only), 'ls' (CPnP LS + "
                               "weighted step), 'epnp' / 'sqpnp' (OpenCV + LM)")
+    refine_steps: int = opt(1, "weighted LM steps after the linear estimate (the method: 1, S2 argues one step is "
+                                "asymptotically enough; on planar pool floors 3 steps measured better)")
     depth_weights: bool = opt(False, "linear-step row weights Z^-3/2 (the authors' code) instead of 1")
     current_noise: bool = opt(False, "add the current-frame noise sigma^2 I to the step's weights (spec 5.4)")
     min_points: int = opt(12, "fewer verified matches than this is a tracking failure")

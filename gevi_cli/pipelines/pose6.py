@@ -46,7 +46,8 @@ def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig
         return R, t, False
     try:
         R2, t2 = _opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False)
-        R2, t2 = est.pnp6_refine(R2, t2, p, cov, q, sigma2_q=sigma2 if cfg.current_noise else 0.0)
+        for _ in range(max(1, cfg.refine_steps)):
+            R2, t2 = est.pnp6_refine(R2, t2, p, cov, q, sigma2_q=sigma2 if cfg.current_noise else 0.0)
         err2 = reprojection_median_px(R2, t2, p, q, f)
     except (est.EstimatorError, cv2.error, TrackingFailure):
         err2 = float("inf")
@@ -75,7 +76,8 @@ def _estimate(p, cov, q, cfg: PnPConfig, sigma2: float):
                 # algebraic cost), then the same weighted LM step.
                 R, t = _opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False)
         if cfg.method in ("be-w", "ls"):
-            R, t = est.pnp6_refine(R, t, p, cov, q, sigma2_q=sigma2 if cfg.current_noise else 0.0)
+            for _ in range(max(1, cfg.refine_steps)):
+                R, t = est.pnp6_refine(R, t, p, cov, q, sigma2_q=sigma2 if cfg.current_noise else 0.0)
         return R, t
     except est.EstimatorError as err:
         raise TrackingFailure(f"{cfg.method}: {err}") from None
