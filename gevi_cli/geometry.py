@@ -1,6 +1,6 @@
 """Rigid-body helpers shared by datasets, trajectories and the simulator (numpy, float64).
 
-Conventions (docs/estimators.md section 1): ``T_BA`` is a 4x4 homogeneous matrix mapping coordinates
+Conventions (docs/method.md section 1): ``T_BA`` is a 4x4 homogeneous matrix mapping coordinates
 in frame A into frame B, ``X_B = R_BA X_A + t_BA``.  Rotations are active.  Quaternions are stored
 w first (Hamilton convention).  The estimators keep their own Lie-group helpers in
 ``gevi_cli.estimators.lie`` (pure math with Jacobians).

@@ -1,6 +1,6 @@
 """Pinhole + radial-tangential camera model and the stereo rig of the simulator.
 
-Camera frame (docs/estimators.md section 1): x right, y down, z forward (optical axis).  Pixel
+Camera frame (docs/method.md section 1): x right, y down, z forward (optical axis).  Pixel
 coordinates: the centre of the top-left pixel is (0, 0); pixel (u, v) covers
 [u - 0.5, u + 0.5] x [v - 0.5, v + 0.5].  Distortion is OpenCV's radial-tangential ("radtan",
 EuRoC "radial-tangential") model with coefficients (k1, k2, p1, p2) applied to normalized
