@@ -168,3 +168,11 @@ def test_unreadable_image_names_the_file(euroc_micro, tmp_path):
 def test_option_of_another_kind_is_a_one_line_error(euroc_micro, capsys):
     code, _, err = run_cli(["info", euroc_micro, "--calib", euroc_micro / "mav0"], capsys)
     assert code == 2 and "--calib: does not apply to euroc sequences" in err
+
+
+def test_gt_is_the_option_name_everywhere(euroc_micro, capsys):
+    """`--gt` (issue 12: one name for one thing; `--groundtruth` stays as an alias)."""
+    gt = euroc_micro / "groundtruth/V1_01_easy.csv"
+    for opt in ("--gt", "--groundtruth"):
+        code, out, _ = run_cli(["info", euroc_micro, opt, gt], capsys)
+        assert code == 0 and "GT coverage   95 of 95 frames" in out
