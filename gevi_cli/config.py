@@ -20,17 +20,14 @@ def _field_types(cls) -> dict[str, type]:
 
 
 def _coerce(value, typ, where: str):
-    """``value`` as type ``typ`` (bool/int/float/str, Optional of those, or a dataclass)."""
+    """``value`` as type ``typ`` (bool/int/float/str or Optional of those; dataclass fields are
+    handled by :func:`override`)."""
     origin = typing.get_origin(typ)
     if origin in (typing.Union, getattr(__import__("types"), "UnionType", typing.Union)):
         args = [a for a in typing.get_args(typ) if a is not type(None)]
         if value is None:
             return None
         typ = args[0]
-    if dataclasses.is_dataclass(typ):
-        if not isinstance(value, dict):
-            raise GeviError(where, f"expected a mapping of {typ.__name__} keys, got {value!r}")
-        return typ  # handled by the caller
     if typ is bool:
         if isinstance(value, bool):
             return value

@@ -45,9 +45,7 @@ def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig
     if err <= limit:
         return R, t, False
     try:
-        R2, t2 = _opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False)
-        for _ in range(max(1, cfg.refine_steps)):
-            R2, t2 = est.pnp6_refine(R2, t2, p, cov, q, sigma2_q=sigma2 if cfg.current_noise else 0.0)
+        R2, t2 = _weighted_steps(*_opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False), p, cov, q, cfg, sigma2)
         err2 = reprojection_median_px(R2, t2, p, q, f)
     except (est.EstimatorError, cv2.error, TrackingFailure):
         err2 = float("inf")
@@ -66,23 +64,21 @@ def _estimate(p, cov, q, cfg: PnPConfig, sigma2: float):
         if cfg.method == "ls":
             R, t = est.pnp6_ls(p, q, weights=w)
         else:
-            try:
-                R, t = est.pnp6_be(p, cov, q, weights=w)
-            except est.DegenerateInput:
-                if cfg.method == "be":
-                    raise
-                # Spec 5.5 [PROPOSAL]: where the linear model breaks (kappa <= 0, few points) any
-                # robust PnP followed by the weighted step will do: SQPnP (global minimiser of the
-                # algebraic cost), then the same weighted LM step.
-                R, t = _opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False)
+            R, t = est.pnp6_be(p, cov, q, weights=w)
         if cfg.method in ("be-w", "ls"):
-            for _ in range(max(1, cfg.refine_steps)):
-                R, t = est.pnp6_refine(R, t, p, cov, q, sigma2_q=sigma2 if cfg.current_noise else 0.0)
+            R, t = _weighted_steps(R, t, p, cov, q, cfg, sigma2)
         return R, t
     except est.EstimatorError as err:
         raise TrackingFailure(f"{cfg.method}: {err}") from None
     except cv2.error as err:
         raise TrackingFailure(f"OpenCV {cfg.method}: {str(err).strip().splitlines()[-1]}") from None
+
+
+def _weighted_steps(R, t, p, cov, q, cfg: PnPConfig, sigma2: float):
+    """The weighted LM step(s) of spec 5.4 from the start ``(R, t)``."""
+    for _ in range(max(1, cfg.refine_steps)):
+        R, t = est.pnp6_refine(R, t, p, cov, q, sigma2_q=sigma2 if cfg.current_noise else 0.0)
+    return R, t
 
 
 def _opencv_pnp(p: np.ndarray, q: np.ndarray, flag: int, refine: bool):

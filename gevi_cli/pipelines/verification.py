@@ -24,8 +24,6 @@ def l1_stage(p: np.ndarray, q: np.ndarray, cfg: VerifyConfig) -> np.ndarray:
     if cfg.l1 == "none" or cfg.l1_drop <= 0:
         return np.ones(len(p), dtype=bool)
     try:
-        if cfg.l1 == "lp":
-            return est.pnp_l1_filter(p, q, drop=cfg.l1_drop)
         return est.pnp_l1_filter(p, q, drop=cfg.l1_drop, method=cfg.l1)
     except est.EstimatorError as err:
         raise TrackingFailure(f"l1-PnP: {err}") from None

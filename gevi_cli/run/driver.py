@@ -62,11 +62,12 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
 
     run_dir = Path(run_dir)
     T_B_C, T_C_B = T_B_C0, invert_pose(T_B_C0)
-    body = PoseStream(run_dir / "traj_body.tum", "tum", "body")
-    cam0 = PoseStream(run_dir / "traj_cam0.tum", "tum", "cam0")
     online = PoseStream(run_dir / "traj_online_body.tum", "tum", "body")
-    kitti = PoseStream(run_dir / "traj_cam0_kitti.txt", "kitti", "cam0") if kitti_rows else None
-    kitti_body = PoseStream(run_dir / "traj_body_kitti.txt", "kitti", "body") if kitti_rows else None
+    # the final (after-BA) poses go to every one of these; the frame decides body or cam0 poses
+    finals = [PoseStream(run_dir / "traj_body.tum", "tum", "body"), PoseStream(run_dir / "traj_cam0.tum", "tum", "cam0")]
+    if kitti_rows:
+        finals += [PoseStream(run_dir / "traj_cam0_kitti.txt", "kitti", "cam0"),
+                   PoseStream(run_dir / "traj_body_kitti.txt", "kitti", "body")]
     timing = open(run_dir / "timing.csv", "w", buffering=1)
     timing.write("index,t_ns,total_ms," + ",".join(f"{s}_ms" for s in STAGES) + "\n")
     frames_csv = open(run_dir / "frames.csv", "w", buffering=1)
@@ -78,14 +79,11 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
 
     def emit_final(items):
         for idx, T_w_c in items:
-            t_ns = stamps[idx]
-            cam0.append(t_ns, T_w_c)
-            body.append(t_ns, T_B_C @ T_w_c @ T_C_B)
-            if kitti is not None:
-                kitti.append(t_ns, T_w_c)
-                kitti_body.append(t_ns, T_B_C @ T_w_c @ T_C_B)
+            poses = {"cam0": T_w_c, "body": T_B_C @ T_w_c @ T_C_B}
+            for stream in finals:
+                stream.append(stamps[idx], poses[stream.frame])
 
-    def close_lost(end_idx, end_t):
+    def close_lost(end_t):
         nonlocal lost_open
         if lost_open is not None:
             i0, t0, reason, n = lost_open
@@ -96,7 +94,6 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
     bar = tqdm(total=stop - start, unit="frame", disable=not progress, dynamic_ncols=True, leave=False)
     write_status(run_dir, status)
     try:
-        k = 0  # index inside the odometry (unreadable frames are skipped, not tracked)
         frames = _frames(source, start, stop)
         while True:
             t_read = time.perf_counter()
@@ -131,16 +128,15 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
                 lost_open[3] += 1
             else:
                 status.frames_tracked += 1
-                close_lost(index, res.t_ns)
-            k += 1
+                close_lost(res.t_ns)
             bar.update(1)
-            if progress and k % 10 == 0:
+            if progress and status.frames_done % 10 == 0:
                 bar.set_postfix_str(f"kf {status.keyframes} inl {res.n_inliers}")
-            if k % 50 == 0:
+            if status.frames_done % 50 == 0:
                 status.elapsed_s = time.perf_counter() - t_run
                 write_status(run_dir, status)
         if lost_open is not None:
-            close_lost(None, max(stamps.values()) if stamps else 0)
+            close_lost(max(stamps.values()) if stamps else 0)
         emit_final(odometry.finish())
         status.state = "lost-tracking" if status.lost_intervals else "ok"
         if status.lost_intervals:
@@ -161,9 +157,8 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
         raise
     finally:
         bar.close()
-        for s in (body, cam0, online, kitti, kitti_body):
-            if s is not None:
-                s.close()
+        for stream in [online] + finals:
+            stream.close()
         timing.close()
         frames_csv.close()
         status.elapsed_s = time.perf_counter() - t_run

@@ -212,14 +212,13 @@ def _evaluate(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status, ec
     """`gevi eval --gt GT -e METHOD=RUN/traj_body.tum` into RUN/eval (the same code path)."""
     from gevi_cli.evaluation.runner import run_eval
 
-    lines = []
     try:
         results, tables, _ = run_eval(
             gt_opts=[str(gt)], estimates=[f"{req.method}={run_dir / status.primary}"], results_root=None, gt_root=None,
             sequence_name=seq_name, align=cfg.run.align, n_align=-1, max_diff=0.01, t_offset=0.0,
             rpe_delta=cfg.run.rpe_delta, rpe_unit="frames", min_coverage=0.0, est_frame="same", gt_frame="body",
             t_b_c0=None, kitti=True, plots=req.plots, out=str(run_dir / "eval"), overwrite=True, keep_going=True,
-            quiet=True, echo=lambda *a, **k: lines.append(a[0] if a else ""))
+            quiet=True, echo=lambda *a, **k: None)  # the run prints its own one-line summary
     except GeviError as err:  # the run is complete on disk; an unusable evaluation must not hide it
         status.evaluation = {"failed": err.one_line()}
         echo(f"evaluation failed: {err.one_line()}")
