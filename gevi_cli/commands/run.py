@@ -11,13 +11,14 @@ import click  # noqa: E402
 
 from gevi_cli.commands.options import add_sequence_options  # noqa: E402
 
-METHODS = ("cfo",)
+METHODS = ("gevi", "cfo")
 
 
 @click.command("run")
 @click.argument("sequence", type=click.Path(), required=False)
-@click.option("--method", type=click.Choice(METHODS), default="cfo", show_default=True,
-              help="cfo: CurrentFeature Odometry (stereo).")
+@click.option("--method", type=click.Choice(METHODS), default=None,
+              help="gevi: gravity-enhanced stereo-inertial odometry; cfo: CurrentFeature Odometry (stereo). "
+                   "Default: gevi when the sequence has an IMU, else cfo.")
 @click.option("--start", type=click.IntRange(min=0), default=0, help="First frame (index).")
 @click.option("--max-frames", type=click.IntRange(min=1), default=None, help="Number of frames to run.")
 @click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
@@ -27,6 +28,13 @@ METHODS = ("cfo",)
               help="Pose estimator (ablations; = --set pnp.method=...).")
 @click.option("--no-ba", is_flag=True, help="No epipolar local BA (= --set ba.enabled=false).")
 @click.option("--seed", type=int, default=None, help="RANSAC seed (= --set run.seed=...).")
+@click.option("--ransac", type=click.Choice(["3pt", "5pt"]), default=None,
+              help="gevi: verification RANSAC (ablation; = --set verify.ransac=...).")
+@click.option("--no-adaptive", is_flag=True, help="gevi: fixed gravity-prior weight (= --set fusion.adaptive=false).")
+@click.option("--no-fusion", is_flag=True, help="gevi: 4-DOF only, roll/pitch from the IMU alone "
+                                                "(= --set fusion.mode=4dof).")
+@click.option("--imu-time-offset", type=float, default=None, metavar="SECONDS",
+              help="gevi: camera-IMU time shift t_imu = t_cam + shift (default: the calibration's).")
 @click.option("-o", "--out", default=None, type=click.Path(file_okay=False),
               help="Run folder (default results/<method>/<sequence>/<timestamp>/).")
 @click.option("--results-root", default="results", show_default=True, type=click.Path(file_okay=False),
@@ -35,15 +43,19 @@ METHODS = ("cfo",)
 @click.option("--dump-config", is_flag=True, help="Print every --set key with its effective value and exit.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar; only the result lines.")
 @add_sequence_options
-def command(sequence, method, start, max_frames, config_file, sets, pnp, no_ba, seed, out, results_root, plots,
-            dump_config, quiet, kind, groundtruth, calib, imu_calib, topics, cameras):
+def command(sequence, method, start, max_frames, config_file, sets, pnp, no_ba, seed, ransac, no_adaptive, no_fusion,
+            imu_time_offset, out, results_root, plots, dump_config, quiet, kind, groundtruth, calib, imu_calib, topics,
+            cameras):
     """Run odometry on SEQUENCE and evaluate it against its ground truth.
+
+    Without SEQUENCE: GeVI on the built-in pool-easy sample (rendered on first use).
 
     SEQUENCE is a dataset folder or bag (EuRoC, pool, KITTI, rosbag, `gevi simulate` output) or an
     OV2SLAM track export (with --calib calib.txt; the front end is then the export's).
 
     \b
     Examples:
+      gevi run
       gevi run ../shared/data/kitti06_head/dataset/sequences/06
       gevi run ../shared/data/euroc_micro --gt ../shared/data/euroc_micro/groundtruth/V1_01_easy.csv
       gevi run EXPORT/ov2slam_data_kitti_04_gray --calib EXPORT/../calib/gray_calib.txt --gt 04.txt
@@ -54,7 +66,8 @@ def command(sequence, method, start, max_frames, config_file, sets, pnp, no_ba, 
     req = RunRequest(sequence=sequence, method=method, start=start, max_frames=max_frames, config_file=config_file,
                      sets=tuple(sets), pnp=pnp, no_ba=no_ba, seed=seed, out=out, results_root=results_root,
                      plots=plots, quiet=quiet, kind=kind, groundtruth=groundtruth, calib=calib, imu_calib=imu_calib,
-                     topics=topics, cameras=cameras)
+                     topics=topics, cameras=cameras, ransac=ransac, no_adaptive=no_adaptive, no_fusion=no_fusion,
+                     imu_time_offset=imu_time_offset)
     if dump_config:
         from gevi_cli.run.session import dump_config as dump
 

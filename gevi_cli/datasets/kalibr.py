@@ -66,6 +66,7 @@ class Camchain:
     rig: StereoRig
     topics: dict[str, str] = field(default_factory=dict)  # "left"/"right" -> rostopic, when given
     warnings: list[str] = field(default_factory=list)
+    time_shift_s: float = 0.0  # cam0.timeshift_cam_imu: t_imu = t_cam + shift (s)
 
 
 def is_camchain(data: dict) -> bool:
@@ -82,6 +83,7 @@ def read_camchain(path: Path) -> Camchain:
     warnings: list[str] = []
     cams = {}
     T_cam_imu = {}
+    shifts = {}
     for name in ("cam0", "cam1"):
         block = data[name]
         cams[name] = _intrinsics(block, path, name)
@@ -91,9 +93,7 @@ def read_camchain(path: Path) -> Camchain:
             shift = float(shift)
         except (TypeError, ValueError):
             raise DataError(path, f"'{name}.timeshift_cam_imu' is not a number") from None
-        if shift != 0.0:
-            warnings.append(f"{path}: {name}.timeshift_cam_imu = {shift:g} s is not applied; "
-                            "image stamps are used as recorded")
+        shifts[name] = shift
     T_C1_C0 = matrix(data["cam1"]["T_cn_cnm1"], path, "cam1.T_cn_cnm1") if "T_cn_cnm1" in data["cam1"] else None
 
     if T_cam_imu["cam0"] is not None:
@@ -119,7 +119,10 @@ def read_camchain(path: Path) -> Camchain:
     rig = StereoRig(_with_pose(cams["cam0"], T_B_C0), _with_pose(cams["cam1"], T_B_C1))
     topics = {side: str(data[cam]["rostopic"]) for side, cam in (("left", "cam0"), ("right", "cam1"))
               if data[cam].get("rostopic")}
-    return Camchain(rig, topics, warnings)
+    if shifts["cam1"] != shifts["cam0"]:
+        warnings.append(f"{path}: cam1.timeshift_cam_imu ({shifts['cam1']:g} s) differs from cam0's "
+                        f"({shifts['cam0']:g} s); the stereo pair is taken as synchronous and cam0's is applied")
+    return Camchain(rig, topics, warnings, shifts["cam0"])
 
 
 def _intrinsics(block: dict, path: Path, name: str) -> PinholeCamera:

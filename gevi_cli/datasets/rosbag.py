@@ -305,6 +305,7 @@ class RosbagSequence(Sequence):
             chain = read_camchain(camchain_file)
             rig, calib_topics = chain.rig, chain.topics
             self.warnings.extend(chain.warnings)
+            self.imu_time_offset_s = chain.time_shift_s
             self.calibration_file = camchain_file
         else:
             self.calibration_file = Path(calib)

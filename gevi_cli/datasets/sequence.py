@@ -76,6 +76,8 @@ class Sequence(abc.ABC):
     """
 
     kind: str = ""
+    #: camera-IMU time shift from the calibration (Kalibr ``timeshift_cam_imu``: t_imu = t_cam + shift), s
+    imu_time_offset_s: float = 0.0
 
     def __init__(self):
         self.warnings: list[str] = []

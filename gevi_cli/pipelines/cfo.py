@@ -12,8 +12,8 @@ import numpy as np
 from gevi_cli.frontend import FrontEnd
 from gevi_cli.pipelines.config import OdometryConfig
 from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches, _make_T
-from gevi_cli.pipelines.pose6 import estimate_pose6, reprojection_median_px
-from gevi_cli.pipelines.verification import FivePointL1Verification, TrackingFailure
+from gevi_cli.pipelines.pose6 import tracked_pose6
+from gevi_cli.pipelines.verification import FivePointL1Verification
 
 
 class CurrentFeatureOdometry(KeyframeOdometry):
@@ -22,15 +22,8 @@ class CurrentFeatureOdometry(KeyframeOdometry):
     def __init__(self, frontend: FrontEnd, cfg: OdometryConfig):
         super().__init__(frontend, cfg)
         self.verification = FivePointL1Verification(cfg.verify, self.camera)
-        self.fallbacks = 0  # frames whose pose step started from SQPnP instead of Bias-Eli
 
     def estimate_T_ck(self, m: Matches, frame) -> np.ndarray:
-        cov = m.cov_unit * self.sigma2
-        R, t, fallback = estimate_pose6(m.p, cov, m.q, self.cfg.pnp, self.sigma2, self.camera.f)
+        R, t, fallback = tracked_pose6(m.p, m.cov_unit * self.sigma2, m.q, self.cfg.pnp, self.sigma2, self.camera.f)
         self.fallbacks += int(fallback)
-        if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
-            raise TrackingFailure("non-finite pose")
-        med = reprojection_median_px(R, t, m.p, m.q, self.camera.f)
-        if med > self.cfg.pnp.max_median_px:
-            raise TrackingFailure(f"median reprojection error {med:.2f} px after the pose step")
         return _make_T(R, t)

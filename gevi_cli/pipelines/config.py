@@ -6,12 +6,14 @@ lists every key with its default; ``configs/<kind>.yaml`` overrides them per dat
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Optional
 
 from gevi_cli.config import opt
 from gevi_cli.frontend.config import FrontendConfig
 
 PNP_METHODS = ("be-w", "be", "ls", "epnp", "sqpnp")
-RANSAC_METHODS = ("5pt", "none")
+RANSAC_METHODS = ("5pt", "3pt", "none")
+METHODS = ("gevi", "cfo")
 L1_METHODS = ("lp", "irls", "none")
 NOISE_METHODS = ("symmetric", "onesided", "stereo")
 
@@ -20,8 +22,11 @@ NOISE_METHODS = ("symmetric", "onesided", "stereo")
 class VerifyConfig:
     """Two-stage verification of keyframe<->current matches (spec 12.1 / 5.5)."""
 
-    ransac: str = opt("5pt", "first stage: '5pt' (OpenCV 5-point essential-matrix RANSAC) or 'none'")
-    ransac_threshold_px: float = opt(1.0, "RANSAC inlier threshold (Sampson distance, px)")
+    ransac: str = opt("5pt", "first stage: '5pt' (OpenCV 5-point essential-matrix RANSAC), '3pt' (GeVI: upright "
+                             "3-point RANSAC with the IMU roll/pitch, spec 7) or 'none'")
+    ransac_threshold_px: float = opt(1.0, "RANSAC inlier threshold (Sampson distance, px); 3pt: the larger of this "
+                                          "and threshold_sigmas x the noise std")
+    threshold_sigmas: float = opt(3.0, "3pt: inlier threshold in noise std (spec 7 [PROPOSAL] 3 sigma)")
     ransac_prob: float = opt(0.999, "RANSAC confidence")
     min_parallax_px: float = opt(0.5, "below this median KF->current displacement the essential matrix "
                                       "is undefined (no translation): the 5-point stage is skipped")
@@ -96,6 +101,46 @@ class BAConfig:
 
 
 @dataclass
+class ImuConfig:
+    """The IMU as GeVI uses it."""
+
+    time_offset_s: Optional[float] = opt(None, "camera-IMU time shift, t_imu = t_cam + shift (s); empty: the "
+                                               "calibration's (Kalibr timeshift_cam_imu), else 0")
+    max_gap_factor: float = opt(5.0, "an IMU interval longer than this many sample periods is a gap: the frame "
+                                     "is tracked visually (6-DOF) and status.json says so")
+
+
+@dataclass
+class InitConfig:
+    """Stereo-IMU initialisation with known scale (spec 9 [PROPOSAL])."""
+
+    still_min_s: float = opt(1.0, "a standstill start is initialised after this long at rest (s); gravity and gyro "
+                                  "bias are then re-estimated over the whole standstill while it lasts")
+    still_max_flow_px: float = opt(0.5, "at rest: mean image displacement from the first frame below this (px)")
+    still_max_gyro_std: float = opt(0.1, "at rest: gyro std per axis below this (rad/s; vibrating platforms reach "
+                                         "0.06)")
+    still_max_acc_std: float = opt(0.5, "at rest: std of |a| below this (m/s^2)")
+    still_max_gravity_err: float = opt(0.5, "at rest: | mean |a| - 9.81 | below this (m/s^2)")
+    window_s: float = opt(2.0, "moving start: seconds of stereo odometry used by the stereo-IMU initialisation")
+    max_window_s: float = opt(6.0, "moving start: retry with a growing window up to this long (s)")
+    stride: int = opt(2, "moving start: every this many frames is an initialisation pose")
+    ba_prior_sigma: float = opt(0.05, "zero-mean prior on the accelerometer bias (m/s^2, spec 9.6)")
+
+
+@dataclass
+class FusionConfig:
+    """GeVI per-frame attitude / pose refinement (spec 8)."""
+
+    mode: str = opt("bcd", "'bcd' (6-DOF refinement with the jointly estimated gravity-prior covariance) or '4dof' "
+                           "(4-DOF BE + GN only; roll/pitch from the IMU-only attitude filter of `gevi imu`)")
+    adaptive: bool = opt(True, "estimate the gravity-prior covariance (false: fixed at its noise floor)")
+    max_iter: int = opt(6, "BCD iterations")
+    lm_iters: int = opt(2, "LM iterations per chi-step")
+    sigma_hi: float = opt(0.2, "upper bound of the gravity-prior std (sqrt of the largest eigenvalue)")
+    kf_tilt_floor_deg: float = opt(0.05, "lower bound of the keyframe roll/pitch prior std (deg)")
+
+
+@dataclass
 class RunConfig:
     """Run-level settings."""
 
@@ -115,6 +160,9 @@ class OdometryConfig:
     pnp: PnPConfig = field(default_factory=PnPConfig)
     keyframe: KeyframeConfig = field(default_factory=KeyframeConfig)
     ba: BAConfig = field(default_factory=BAConfig)
+    imu: ImuConfig = field(default_factory=ImuConfig)
+    init: InitConfig = field(default_factory=InitConfig)
+    fusion: FusionConfig = field(default_factory=FusionConfig)
     run: RunConfig = field(default_factory=RunConfig)
 
     def validate(self, where: str = "config") -> "OdometryConfig":
@@ -125,4 +173,14 @@ class OdometryConfig:
         check_choice(self.verify.l1, L1_METHODS, f"{where}: verify.l1")
         check_choice(self.noise.method, NOISE_METHODS, f"{where}: noise.method")
         check_choice(self.ba.kernel, ("huber", "truncated", "none"), f"{where}: ba.kernel")
+        check_choice(self.fusion.mode, ("bcd", "4dof"), f"{where}: fusion.mode")
         return self
+
+
+#: Per-method defaults applied over the dataclass defaults (before configs/<kind>.yaml): GeVI verifies
+#: with its 3-point RANSAC only (spec 2: no l1 stage) and runs without the epipolar BA by default
+#: (spec 2 lists no BA for GeVI; ``--set ba.enabled=true`` turns it on).
+METHOD_DEFAULTS = {
+    "cfo": {},
+    "gevi": {"verify": {"ransac": "3pt", "l1": "none"}, "ba": {"enabled": False}},
+}

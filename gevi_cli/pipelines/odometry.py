@@ -46,6 +46,7 @@ class Matches:
 
     ids: np.ndarray
     z: np.ndarray  # keyframe-left normalized
+    y: np.ndarray  # keyframe-right normalized
     q: np.ndarray  # current-left normalized
     p: np.ndarray  # keyframe-left points (m)
     cov_unit: np.ndarray
@@ -82,6 +83,7 @@ class KeyframeOdometry:
     """Base class; subclasses set ``self.verification`` and implement :meth:`estimate_T_ck`."""
 
     name = "odometry"
+    world_is_cam0 = True  # W = the first keyframe's rectified cam0 (GeVI: a gravity-aligned W)
 
     def __init__(self, frontend: FrontEnd, cfg: OdometryConfig):
         self.frontend = frontend
@@ -98,6 +100,8 @@ class KeyframeOdometry:
         self.verification = None
         self._last = None  # (p, q) of the last tracked frame's verified matches
         self.ba_rejected = 0
+        self.fallbacks = 0  # frames whose 6-DOF pose step started from SQPnP instead of Bias-Eli
+        self.last_disp_px = 0.0  # mean keyframe -> current displacement of the verified matches (px)
 
     # ------------------------------------------------------------------ to be provided by pipelines
     def estimate_T_ck(self, m: Matches, frame) -> np.ndarray:  # pragma: no cover - abstract
@@ -165,7 +169,7 @@ class KeyframeOdometry:
     def _match(self, ids: np.ndarray, q_all: np.ndarray) -> Matches:
         kf = self.kf
         _, i_kf, i_obs = np.intersect1d(kf.ids, ids, assume_unique=True, return_indices=True)
-        return Matches(kf.ids[i_kf], kf.z[i_kf], q_all[i_obs], kf.p[i_kf], kf.cov_unit[i_kf])
+        return Matches(kf.ids[i_kf], kf.z[i_kf], kf.y[i_kf], q_all[i_obs], kf.p[i_kf], kf.cov_unit[i_kf])
 
     def _update_sigma2(self, z: np.ndarray, q: np.ndarray) -> None:
         cfg = self.cfg.noise
@@ -193,7 +197,7 @@ class KeyframeOdometry:
         if n_match < self.cfg.pnp.min_points:
             raise TrackingFailure(f"only {n_match} keyframe points tracked")
         keep = self.verification(m.z, m.q, m.p, self.cfg.run.seed + self.index)
-        m = Matches(m.ids[keep], m.z[keep], m.q[keep], m.p[keep], m.cov_unit[keep])
+        m = Matches(m.ids[keep], m.z[keep], m.y[keep], m.q[keep], m.p[keep], m.cov_unit[keep])
         t1 = time.perf_counter()
         timings["verify"] = t1 - t0
         if len(m.ids) < self.cfg.pnp.min_points:
@@ -204,6 +208,7 @@ class KeyframeOdometry:
         T_ck = self.estimate_T_ck(m, frame)
         timings["pose"] = time.perf_counter() - t2
         disp_px = float(np.mean(np.linalg.norm(m.q - m.z, axis=1))) * self.camera.f
+        self.last_disp_px = disp_px
         self._last = (m.p, m.q)
         return T_ck, n_match, len(m.ids), disp_px
 

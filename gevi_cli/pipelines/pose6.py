@@ -45,7 +45,7 @@ def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig
     if err <= limit:
         return R, t, False
     try:
-        R2, t2 = _weighted_steps(*_opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False), p, cov, q, cfg, sigma2)
+        R2, t2 = _weighted_steps(*opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False), p, cov, q, cfg, sigma2)
         err2 = reprojection_median_px(R2, t2, p, q, f)
     except (est.EstimatorError, cv2.error, TrackingFailure):
         err2 = float("inf")
@@ -59,7 +59,7 @@ def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig
 def _estimate(p, cov, q, cfg: PnPConfig, sigma2: float):
     try:
         if cfg.method in ("epnp", "sqpnp"):
-            return _opencv_pnp(p, q, cv2.SOLVEPNP_EPNP if cfg.method == "epnp" else cv2.SOLVEPNP_SQPNP, refine=True)
+            return opencv_pnp(p, q, cv2.SOLVEPNP_EPNP if cfg.method == "epnp" else cv2.SOLVEPNP_SQPNP, refine=True)
         w = est.depth_weights(p) if cfg.depth_weights else None
         if cfg.method == "ls":
             R, t = est.pnp6_ls(p, q, weights=w)
@@ -81,7 +81,7 @@ def _weighted_steps(R, t, p, cov, q, cfg: PnPConfig, sigma2: float):
     return R, t
 
 
-def _opencv_pnp(p: np.ndarray, q: np.ndarray, flag: int, refine: bool):
+def opencv_pnp(p: np.ndarray, q: np.ndarray, flag: int, refine: bool):
     """OpenCV PnP on normalized coordinates (K = I), optionally + OpenCV's LM -> (R, t)."""
     obj = np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 1, 3)
     img = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 1, 2)
@@ -102,3 +102,19 @@ def reprojection_median_px(R: np.ndarray, t: np.ndarray, p: np.ndarray, q: np.nd
         return float("inf")
     r = q[front] - X[front, :2] / X[front, 2:3]
     return float(np.median(np.linalg.norm(r, axis=1))) * f
+
+
+def tracked_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig, sigma2: float, f: float):
+    """The 6-DOF tracking step of the pipelines: (R_ck, t_ck, fell_back) or :class:`TrackingFailure`.
+
+    :func:`estimate_pose6`, then the sanity gates: finite, median reprojection error below
+    ``cfg.max_median_px``.  CurrentFeature Odometry uses it for every frame, GeVI before its
+    initialisation and where the IMU has a gap.
+    """
+    R, t, fallback = estimate_pose6(p, cov, q, cfg, sigma2, f)
+    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+        raise TrackingFailure("non-finite pose")
+    med = reprojection_median_px(R, t, p, q, f)
+    if med > cfg.max_median_px:
+        raise TrackingFailure(f"median reprojection error {med:.2f} px after the pose step")
+    return R, t, fallback

@@ -31,3 +31,4 @@ class FrameResult:
     message: str = ""
     final: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)  # stage -> seconds
+    extra: dict = field(default_factory=dict)  # pipeline-specific per-frame state (GeVI: imu_states.csv row)

@@ -61,3 +61,46 @@ class FivePointL1Verification:
         out = np.zeros(len(z), dtype=bool)
         out[idx[sub]] = True
         return out
+
+
+class ThreePointVerification:
+    """GeVI's verification (spec 7): upright 3-point RANSAC on keyframe-left / current-left with the
+    IMU roll/pitch of both frames, Sampson threshold max(``threshold_sigmas`` sigma, the px threshold);
+    then the optional l1 stage as in CFO (off in GeVI's defaults).
+
+    ``levelling()`` returns ``(L_k, L_c, sigma)``: the levelling rotations of keyframe and current
+    camera (camera -> yaw-free level frame) and the current normalized noise std.
+    """
+
+    def __init__(self, cfg: VerifyConfig, camera: RectifiedStereo, levelling):
+        self.cfg = cfg
+        self.camera = camera
+        self.levelling = levelling
+        self.iterations = 0  # minimal samples drawn in the last call (for the --ransac ablation)
+
+    def ransac(self, z: np.ndarray, q: np.ndarray, seed: int) -> np.ndarray:
+        cfg, n = self.cfg, len(z)
+        if n < 3:
+            return np.ones(n, dtype=bool)
+        parallax_px = np.median(np.linalg.norm(q - z, axis=1)) * self.camera.f
+        if parallax_px < cfg.min_parallax_px:
+            return np.ones(n, dtype=bool)  # as for 5-point: no translation, the model cannot classify
+        L_k, L_c, sigma = self.levelling()
+        thr = max(cfg.threshold_sigmas * sigma, cfg.ransac_threshold_px / self.camera.f)
+        try:
+            _, _, inliers, it = est.ransac_3pt_upright(z, q, L_k, L_c, thr, seed=int(seed),
+                                                       confidence=cfg.ransac_prob)
+        except est.EstimatorError as err:
+            raise TrackingFailure(f"3-point RANSAC: {err}") from None
+        self.iterations = int(it)
+        return inliers
+
+    def __call__(self, z: np.ndarray, q: np.ndarray, p: np.ndarray, seed: int) -> np.ndarray:
+        keep = self.ransac(z, q, seed)
+        idx = np.flatnonzero(keep)
+        if len(idx) < 6:
+            raise TrackingFailure(f"only {len(idx)} matches survive 3-point RANSAC")
+        sub = l1_stage(p[idx], q[idx], self.cfg)
+        out = np.zeros(len(z), dtype=bool)
+        out[idx[sub]] = True
+        return out

@@ -61,7 +61,10 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
     from tqdm import tqdm
 
     run_dir = Path(run_dir)
-    T_B_C, T_C_B = T_B_C0, invert_pose(T_B_C0)
+    # the world of a stereo odometry is its first cam0 (body trajectory: relative to the first body pose,
+    # T_B0_B = T_BC T_C0_C T_CB); a stereo-inertial one has its own gravity-aligned world (T_W_B = T_W_C T_CB)
+    T_C_B = invert_pose(T_B_C0)
+    T_B_C = T_B_C0 if getattr(odometry, "world_is_cam0", True) else np.eye(4)
     online = PoseStream(run_dir / "traj_online_body.tum", "tum", "body")
     # the final (after-BA) poses go to every one of these; the frame decides body or cam0 poses
     finals = [PoseStream(run_dir / "traj_body.tum", "tum", "body"), PoseStream(run_dir / "traj_cam0.tum", "tum", "cam0")]
@@ -72,6 +75,11 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
     timing.write("index,t_ns,total_ms," + ",".join(f"{s}_ms" for s in STAGES) + "\n")
     frames_csv = open(run_dir / "frames.csv", "w", buffering=1)
     frames_csv.write("index,t_ns,status,keyframe,matches,inliers,sigma_px,message\n")
+    state_cols = getattr(odometry, "state_columns", None)
+    states_csv = None
+    if state_cols:
+        states_csv = open(run_dir / getattr(odometry, "state_file", "states.csv"), "w", buffering=1)
+        states_csv.write(",".join(state_cols) + "\n")
     stamps: dict[int, int] = {}
     status.frames_total = stop - start
     t_run = time.perf_counter()
@@ -119,6 +127,8 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
             msg = res.message.replace(",", ";").replace("\n", " ")
             frames_csv.write(f"{index},{res.t_ns},{res.status},{int(res.keyframe)},{res.n_matches},{res.n_inliers},"
                              f"{res.sigma_px:.4f},{msg}\n")
+            if states_csv is not None and res.extra:
+                states_csv.write(",".join(_fmt(res.extra.get(c, "")) for c in state_cols) + "\n")
             status.frames_done += 1
             status.keyframes += int(res.keyframe)
             if res.status == BRIDGED:
@@ -161,7 +171,17 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
             stream.close()
         timing.close()
         frames_csv.close()
+        if states_csv is not None:
+            states_csv.close()
+        if hasattr(odometry, "summary"):
+            status.imu = odometry.summary()
         status.elapsed_s = time.perf_counter() - t_run
         status.pose_fallbacks = int(getattr(odometry, "fallbacks", 0))
         write_status(run_dir, status)
     return RunOutcome(status, 0 if status.state == "ok" else 3)
+
+
+def _fmt(v) -> str:
+    if isinstance(v, (float, np.floating)):
+        return f"{float(v):.9g}"
+    return str(v)

@@ -80,6 +80,7 @@ class RunStatus:
     started: str = ""
     elapsed_s: float = 0.0
     evaluation: dict = field(default_factory=dict)
+    imu: dict = field(default_factory=dict)  # stereo-inertial runs: initialisation, biases, IMU gaps
 
 
 def make_run_dir(out: str | None, results_root: Path, method: str, sequence: str) -> Path:

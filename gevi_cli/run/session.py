@@ -6,10 +6,13 @@ Configuration precedence (later wins): dataclass defaults -> ``configs/<kind>.ya
 """
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from gevi_cli.errors import GeviError
 
@@ -21,7 +24,7 @@ KIND_CONFIG = {"euroc": "euroc.yaml", "pool": "pool.yaml", "kitti": "kitti.yaml"
 @dataclass(frozen=True)
 class RunRequest:
     sequence: str | None
-    method: str = "cfo"
+    method: str | None = None  # None: gevi when the sequence has an IMU, else cfo
     start: int = 0
     max_frames: int | None = None
     config_file: str | None = None
@@ -39,6 +42,10 @@ class RunRequest:
     imu_calib: str | None = None
     topics: str | None = None
     cameras: str | None = None
+    ransac: str | None = None
+    no_adaptive: bool = False
+    no_fusion: bool = False
+    imu_time_offset: float | None = None
 
 
 def _is_export(path: Path) -> bool:
@@ -69,12 +76,25 @@ def open_input(req: RunRequest):
     return seq, seq.kind
 
 
-def resolve_config(req: RunRequest, kind: str | None):
+def choose_method(req: RunRequest, source) -> tuple[str, str]:
+    """(method, why): ``--method`` when given, else gevi with an IMU and cfo without."""
+    if req.method:
+        return req.method, "--method"
+    imu = getattr(source, "imu", None)
+    if imu is not None and len(imu) > 1:
+        return "gevi", f"the sequence has an IMU ({len(imu)} samples); --method cfo for stereo only"
+    return "cfo", "the sequence has no IMU"
+
+
+def resolve_config(req: RunRequest, kind: str | None, method: str = "cfo"):
     """The effective :class:`OdometryConfig` and the list of files it came from."""
     from gevi_cli.config import load_yaml, override, parse_set
-    from gevi_cli.pipelines.config import OdometryConfig
+    from gevi_cli.pipelines.config import METHOD_DEFAULTS, OdometryConfig
 
     cfg, sources = OdometryConfig(), ["defaults"]
+    if METHOD_DEFAULTS.get(method):
+        cfg = override(cfg, METHOD_DEFAULTS[method], f"{method} defaults")
+        sources.append(f"{method} defaults")
     kind_file = CONFIG_DIR / KIND_CONFIG.get(kind or "", "")
     if kind and kind_file.is_file():
         cfg = override(cfg, load_yaml(kind_file), str(kind_file))
@@ -92,6 +112,14 @@ def resolve_config(req: RunRequest, kind: str | None):
         shortcuts.setdefault("ba", {})["enabled"] = False
     if req.seed is not None:
         shortcuts.setdefault("run", {})["seed"] = req.seed
+    if req.ransac:
+        shortcuts.setdefault("verify", {})["ransac"] = req.ransac
+    if req.no_adaptive:
+        shortcuts.setdefault("fusion", {})["adaptive"] = False
+    if req.no_fusion:
+        shortcuts.setdefault("fusion", {})["mode"] = "4dof"
+    if req.imu_time_offset is not None:
+        shortcuts.setdefault("imu", {})["time_offset_s"] = req.imu_time_offset
     if shortcuts:
         cfg = override(cfg, shortcuts, "options")
     return cfg.validate(), sources
@@ -100,10 +128,11 @@ def resolve_config(req: RunRequest, kind: str | None):
 def dump_config(req: RunRequest) -> str:
     from gevi_cli.config import flat_items
 
-    kind = None
+    kind, method = None, req.method or "cfo"
     if req.sequence is not None:
-        _, kind = open_input(req)
-    cfg, sources = resolve_config(req, kind)
+        source, kind = open_input(req)
+        method, _ = choose_method(req, source)
+    cfg, sources = resolve_config(req, kind, method)
     lines = [f"# effective configuration ({' -> '.join(sources)}); set any key with --set KEY=VALUE"]
     for key, value, help_text in flat_items(cfg):
         v = "true" if value is True else "false" if value is False else value
@@ -111,7 +140,7 @@ def dump_config(req: RunRequest) -> str:
     return "\n".join(lines)
 
 
-def build(source, kind: str, cfg, method: str):
+def build(source, kind: str, cfg, method: str, warn=None, start: int = 0):
     """(front end, odometry) for ``source``."""
     from gevi_cli.pipelines.cfo import CurrentFeatureOdometry
 
@@ -125,7 +154,42 @@ def build(source, kind: str, cfg, method: str):
         frontend = ImageFrontEnd(source.calibration, cfg.frontend)
     if method == "cfo":
         return frontend, CurrentFeatureOdometry(frontend, cfg)
+    if method == "gevi":
+        from gevi_cli.pipelines.gevi import GeviOdometry
+
+        imu = _imu_stream(source, kind, cfg, warn, start)
+        stamps = source.stamps_ns
+        period = float(np.median(np.diff(stamps))) * 1e-9
+        return frontend, GeviOdometry(frontend, cfg, imu, period)
     raise GeviError("--method", f"unknown method {method!r}")
+
+
+def _imu_stream(source, kind: str, cfg, warn, start: int):
+    """The checked IMU of ``source`` for GeVI (one-line errors, exit 2, for unusable input)."""
+    from gevi_cli.inertial.imu_stream import ImuStream
+
+    name = getattr(source, "path", None) or getattr(source, "name", "sequence")
+    imu = getattr(source, "imu", None)
+    if kind == "ov2slam-tracks" or imu is None or len(imu) < 2:
+        raise GeviError(name, "has no IMU: GeVI is stereo-inertial; use --method cfo")
+    R = np.asarray(source.calibration.T_B_C0, dtype=float)[:3, :3]
+    if not (np.all(np.isfinite(R)) and np.allclose(R @ R.T, np.eye(3), atol=1e-6) and np.linalg.det(R) > 0):
+        raise GeviError(getattr(source, "calibration_file", None) or name,
+                        f"camera-IMU extrinsic T_B_C0 is not a rotation (det {np.linalg.det(R):.6g}, "
+                        f"|R R^T - I| = {np.abs(R @ R.T - np.eye(3)).max():.3g})")
+    offset = cfg.imu.time_offset_s
+    if offset is None:
+        offset = float(getattr(source, "imu_time_offset_s", 0.0) or 0.0)
+    stream = ImuStream.from_sequence(imu, offset, f"{name} (IMU)", warn)
+    stream.max_gap_ns = int(cfg.imu.max_gap_factor * stream.dt_nominal * 1e9)
+    t0 = int(source.stamps_ns[start])
+    t_last = int(source.stamps_ns[-1])
+    need = min(t0 + int(max(cfg.init.window_s, cfg.init.still_min_s) * 1e9), t_last)
+    if not stream.covers(t0, need):
+        have = (f"{stream.t_ns[0] * 1e-9:.3f}..{stream.t_ns[-1] * 1e-9:.3f} s" if len(stream.t_ns) else "none")
+        raise GeviError(f"{name} (IMU)", f"no IMU over the initialisation window {t0 * 1e-9:.3f}..{need * 1e-9:.3f} s "
+                                         f"(IMU covers {have}, or has a gap there)")
+    return stream
 
 
 def _gt_source(req: RunRequest, source):
@@ -139,10 +203,7 @@ def _gt_source(req: RunRequest, source):
 
 def execute(req: RunRequest, echo=print) -> int:
     """Run and evaluate; returns the exit status (0 complete, 3 tracking lost)."""
-    import dataclasses
-
     import cv2
-    import numpy as np
     import yaml
 
     from gevi_cli import __version__
@@ -151,8 +212,16 @@ def execute(req: RunRequest, echo=print) -> int:
 
     t_start = time.perf_counter()
     cv2.setNumThreads(1)
+    if req.sequence is None:
+        from gevi_cli.simulate.sample import sample_path, sample_sequence
+
+        if not sample_path().exists():
+            echo("gevi run: no SEQUENCE given; rendering the built-in pool-easy sample (once, about a minute)")
+        req = dataclasses.replace(req, sequence=str(sample_sequence(progress=not req.quiet and sys.stderr.isatty())))
     source, kind = open_input(req)
-    cfg, sources = resolve_config(req, kind)
+    method, why = choose_method(req, source)
+    req = dataclasses.replace(req, method=method)
+    cfg, sources = resolve_config(req, kind, method)
     n = len(source)
     if n < 2:
         raise GeviError(req.sequence, f"holds {n} frame(s); odometry needs at least two")
@@ -163,10 +232,15 @@ def execute(req: RunRequest, echo=print) -> int:
         raise GeviError("--max-frames", "odometry needs at least two frames")
     for w in getattr(source, "warnings", []):
         echo(f"gevi: warning: {w}", err=True)
-    frontend, odometry = build(source, kind, cfg, req.method)
+    def warn(msg):
+        echo(f"gevi: warning: {msg}", err=True)
+
+    echo(f"gevi run: method {method} ({why})")
+    frontend, odometry = build(source, kind, cfg, req.method, warn=warn, start=req.start)
     seq_name = source.name
     run_dir = make_run_dir(req.out, Path(req.results_root), req.method, seq_name)
-    config_doc = {"method": req.method, "sequence": str(req.sequence), "kind": kind, "sensor": "stereo",
+    sensor = "stereo-inertial" if method == "gevi" else "stereo"
+    config_doc = {"method": req.method, "sequence": str(req.sequence), "kind": kind, "sensor": sensor,
                   "align": cfg.run.align, "frames": [req.start, stop], "sources": sources,
                   **dataclasses.asdict(cfg)}
     (run_dir / "config.yaml").write_text(yaml.safe_dump(config_doc, sort_keys=False))
@@ -177,9 +251,6 @@ def execute(req: RunRequest, echo=print) -> int:
     status = RunStatus(method=req.method, primary=PRIMARY_KITTI if indexed_gt else PRIMARY, sequence=seq_name, gevi_version=__version__,
                        command=" ".join(["gevi"] + sys.argv[1:]), started=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
     echo(f"gevi run: {req.method} on {seq_name} ({kind}), frames {req.start}..{stop - 1} -> {run_dir}")
-
-    def warn(msg):
-        echo(f"gevi: warning: {msg}", err=True)
 
     outcome = run_odometry(source, odometry, run_dir, status, T_B_C0=np.asarray(frontend.camera.T_B_C0),
                            start=req.start, stop=stop, kitti_rows=kitti_rows,
@@ -209,32 +280,46 @@ def execute(req: RunRequest, echo=print) -> int:
 
 
 def _evaluate(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status, echo) -> None:
-    """`gevi eval --gt GT -e METHOD=RUN/traj_body.tum` into RUN/eval (the same code path)."""
+    """`gevi eval --gt GT -e METHOD=RUN/traj_body.tum` into RUN/eval (the same code path).
+
+    The config's alignment (SE(3): what every comparison across methods uses) is primary; a
+    stereo-inertial run adds posyaw (4-DOF, gravity known) beside it in RUN/eval/posyaw.
+    """
+    aligns = [cfg.run.align] + (["posyaw"] if req.method == "gevi" and cfg.run.align != "posyaw" else [])
+    status.evaluation = {}
+    for k, align in enumerate(aligns):
+        out = run_dir / "eval" if k == 0 else run_dir / "eval" / align
+        ev = _evaluate_one(run_dir, req, cfg, gt, seq_name, status, align, out, echo)
+        if k == 0:
+            status.evaluation.update(ev)
+        else:
+            status.evaluation[align] = ev
+
+
+def _evaluate_one(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status, align: str, out: Path, echo) -> dict:
     from gevi_cli.evaluation.runner import run_eval
 
     try:
         results, tables, _ = run_eval(
             gt_opts=[str(gt)], estimates=[f"{req.method}={run_dir / status.primary}"], results_root=None, gt_root=None,
-            sequence_name=seq_name, align=cfg.run.align, n_align=-1, max_diff=0.01, t_offset=0.0,
+            sequence_name=seq_name, align=align, n_align=-1, max_diff=0.01, t_offset=0.0,
             rpe_delta=cfg.run.rpe_delta, rpe_unit="frames", min_coverage=0.0, est_frame="same", gt_frame="body",
-            t_b_c0=None, kitti=True, plots=req.plots, out=str(run_dir / "eval"), overwrite=True, keep_going=True,
+            t_b_c0=None, kitti=True, plots=req.plots, out=str(out), overwrite=True, keep_going=True,
             quiet=True, echo=lambda *a, **k: None)  # the run prints its own one-line summary
     except GeviError as err:  # the run is complete on disk; an unusable evaluation must not hide it
-        status.evaluation = {"failed": err.one_line()}
         echo(f"evaluation failed: {err.one_line()}")
-        return
+        return {"failed": err.one_line()}
     r = results[0]
-    if r.ok and r.ate is not None:
-        rpe = r.rpe.trans_rmse if r.rpe is not None else float("nan")
-        status.evaluation = {"align": r.align, "ate_m": r.ate.trans_rmse, "rpe_m": rpe,
-                             "ate_rot_deg": getattr(r.ate, "rot_rmse_deg", None), "matched": r.association.n_matched}
-        echo(f"ATE {_metres(r.ate.trans_rmse)}, RPE {_metres(rpe)} ({r.align.upper()}, body frame, RPE over "
-             f"{cfg.run.rpe_delta:g} frame; {r.association.summary()})")
-    else:
-        status.evaluation = {"failed": r.reason}
-        echo(f"evaluation failed: {r.reason}")
     for w in r.warnings:
         echo(f"gevi: warning: {w}", err=True)
+    if not (r.ok and r.ate is not None):
+        echo(f"evaluation failed: {r.reason}")
+        return {"failed": r.reason}
+    rpe = r.rpe.trans_rmse if r.rpe is not None else float("nan")
+    echo(f"ATE {_metres(r.ate.trans_rmse)}, RPE {_metres(rpe)} ({r.align.upper()}, body frame, RPE over "
+         f"{cfg.run.rpe_delta:g} frame; {r.association.summary()})")
+    return {"align": r.align, "ate_m": r.ate.trans_rmse, "rpe_m": rpe,
+            "ate_rot_deg": getattr(r.ate, "rot_rmse_deg", None), "matched": r.association.n_matched}
 
 
 def _metres(x: float) -> str:

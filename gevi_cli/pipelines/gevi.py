@@ -1,0 +1,443 @@
+"""GeVI: gravity-enhanced stereo visual-inertial odometry ("GeVI-SLAM", spec 2, 6-9).
+
+Per frame, on top of :class:`~gevi_cli.pipelines.odometry.KeyframeOdometry` (front end, keyframes,
+triangulation from the current keyframe only, noise variance, bridging, run-driver contract):
+
+1. IMU: the gyro rotation since the previous frame (bias-corrected) predicts the current roll/pitch
+   from the last estimate: ``tilt_c = tilt(R_tilt(tilt_prev) dR)`` (yaw-invariant, spec 8.1.3).
+2. Verification: upright 3-point RANSAC with the levelling rotations ``L_k``, ``L_c`` (spec 7).
+3. 4-DOF bias-eliminated estimate of (psi, t_ck) (spec 6.2) and one Gauss-Newton step on the
+   point-to-epipolar-line distances in both keyframe images (spec 6.3).
+4. 6-DOF refinement with the jointly estimated gravity-prior covariance, by block coordinate descent
+   (spec 8) over the frames since the keyframe: visual reprojection residuals of the current frame,
+   one gravity residual per frame (the unit mean specific force over a frame period centred on the
+   frame stamp, accelerometer bias removed), the gyro chain between frames and the keyframe-tilt prior.
+   Its current-frame tilt is fed forward (step 1 of the next frame); at a keyframe it becomes the
+   keyframe tilt with the marginal covariance as the next windows' prior.
+
+Before that, the initialisation with known scale (spec 9): a standstill start (image motion and IMU
+both at rest for ``init.still_min_s``) gives gravity from the mean specific force and the gyro bias
+from the mean rate, both re-estimated over the whole standstill while it lasts; otherwise the first
+``init.window_s`` of 6-DOF stereo odometry (Bias-Eli-W, as CFO) feed :func:`stereo_imu_init` (gyro
+bias, velocities, gravity, accelerometer bias with its prior).  The poses of the initialisation
+window are held back and re-expressed in the gravity-aligned world frame W (z up, yaw of the first
+camera arbitrary) once it is known, so the trajectory is one piece.  Where the IMU has a gap (or ends
+before the images) the frame is tracked with the 6-DOF visual step and the interval is reported.
+
+Frames: ``T_w_c`` is rectified cam0 in W; the body frame B is the IMU frame; ``R_ic`` = R_BC0 maps
+camera vectors into the IMU frame.  Tilts are (roll, pitch) of R_WI in rad (ZYX, spec 1).
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from gevi_cli import estimators as est
+from gevi_cli.frontend import FrontEnd
+from gevi_cli.inertial.attitude import AttitudeFilterConfig, GravityAttitudeFilter, run_filter
+from gevi_cli.inertial.imu_stream import ImuStream
+from gevi_cli.inertial.standstill import GRAVITY, imu_at_rest, tilt_from_specific_force
+from gevi_cli.pipelines.config import OdometryConfig
+from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches, _make_T
+from gevi_cli.pipelines.pose6 import opencv_pnp, reprojection_median_px, tracked_pose6
+from gevi_cli.pipelines.types import OK
+from gevi_cli.pipelines.verification import FivePointL1Verification, ThreePointVerification, TrackingFailure
+
+INIT, STANDSTILL, GEVI, VISUAL, BRIDGED_IMU = "init", "standstill", "gevi", "visual", "bridged"
+
+#: imu_states.csv columns (angles rad, biases rad/s and m/s^2, Sigma dimensionless unit-vector variance)
+STATE_COLUMNS = ("index", "t_ns", "phase", "roll", "pitch", "yaw", "bgx", "bgy", "bgz", "bax", "bay", "baz",
+                 "sigma_trace", "s_xx", "s_yy", "s_zz", "s_xy", "s_xz", "s_yz", "tilt_std", "ransac_iters")
+
+
+@dataclass
+class FrameSample:
+    """IMU summary of one frame of the BCD window: unit bias-corrected specific force ``acc_dir``,
+    gyro rotation vector ``rotvec`` from the previous frame (rad), ``dt`` (s), estimated ``tilt``."""
+
+    index: int
+    t_ns: int
+    t_prev_ns: int | None
+    acc_dir: np.ndarray
+    rotvec: np.ndarray
+    dt: float
+    tilt: np.ndarray
+
+
+def _tilt_of(R_wc: np.ndarray, R_ic: np.ndarray) -> np.ndarray:
+    return np.array(est.tilt_angles(R_wc @ R_ic.T))
+
+
+def _yaw_of(R_wi: np.ndarray) -> float:
+    return float(np.arctan2(R_wi[1, 0], R_wi[0, 0]))
+
+
+class GeviOdometry(KeyframeOdometry):
+    name = "gevi"
+    world_is_cam0 = False
+    state_file = "imu_states.csv"
+    state_columns = STATE_COLUMNS
+
+    def __init__(self, frontend: FrontEnd, cfg: OdometryConfig, imu: ImuStream, frame_period_s: float):
+        super().__init__(frontend, cfg)
+        self.imu = imu
+        T_B_C = np.asarray(self.camera.T_B_C0, dtype=float)
+        self.R_ic, self.p_ic = T_B_C[:3, :3], T_B_C[:3, 3]
+        self.frame_period = float(frame_period_s)
+        six_cfg = dataclasses.replace(cfg.verify, ransac="5pt")
+        self.six_verify = FivePointL1Verification(six_cfg, self.camera)
+        if cfg.verify.ransac == "3pt":
+            self.gevi_verify = ThreePointVerification(cfg.verify, self.camera, self._levelling)
+        else:
+            self.gevi_verify = FivePointL1Verification(cfg.verify, self.camera)
+        self.verification = self._verify
+        self.phase = INIT
+        self.mode = INIT  # how the current frame is tracked: INIT / GEVI / VISUAL
+        self.b_g, self.b_a = np.zeros(3), np.zeros(3)
+        self.tilt = np.zeros(2)
+        self.tilt_pred = np.zeros(2)
+        self.tilt_cov = np.eye(2)
+        self.kf_tilt, self.kf_tilt_cov = np.zeros(2), np.eye(2)
+        self.Sigma = np.full((3, 3), np.nan)
+        self.win: list[FrameSample] = []
+        self.cur: FrameSample | None = None
+        self.t_prev: int | None = None
+        self.t_first: int | None = None
+        self.first_kf_index: int | None = None
+        self.still = True  # the standstill that started the run is still going on
+        self.init_poses: list[tuple[int, int, np.ndarray]] = []  # (index, t_ns, T_w_c) in V, tracked ones
+        self.next_init_try: int | None = None
+        self.init_info: dict = {}
+        self.gaps: list[dict] = []  # IMU gaps: {"first_index", "start_ns", "end_ns", "frames"}
+        self.attitude = None  # AttitudeTrack of the IMU-only filter (fusion.mode = 4dof)
+        self.bcd_ms = 0.0
+
+    # --------------------------------------------------------------------------------- helpers
+    def _levelling(self):
+        return (est.levelling(*self.kf_tilt, self.R_ic), est.levelling(*self.tilt_pred, self.R_ic),
+                float(np.sqrt(self.sigma2)))
+
+    def _verify(self, z, q, p, seed):
+        return (self.gevi_verify if self.mode == GEVI else self.six_verify)(z, q, p, seed)
+
+    def _acc_dir(self, t_ns: int) -> np.ndarray:
+        """Unit specific force (accelerometer bias removed) over a frame period centred on ``t_ns``."""
+        h = int(0.5 * self.frame_period * 1e9)
+        _, _, a = self.imu.window(t_ns - h, t_ns + h)
+        if len(a) == 0:
+            return np.full(3, np.nan)
+        a = a.mean(0) - self.b_a
+        return a / np.linalg.norm(a)
+
+    def _sample(self, index: int, t_ns: int) -> FrameSample:
+        rotvec, dt = np.zeros(3), 0.0
+        if self.t_prev is not None:
+            fi = self.imu.interval(self.t_prev, t_ns, self.b_g)
+            rotvec, dt = fi.rotvec, (t_ns - self.t_prev) * 1e-9
+            if fi.gap:
+                rotvec = np.full(3, np.nan)
+        return FrameSample(index, t_ns, self.t_prev, self._acc_dir(t_ns), rotvec, dt, np.zeros(2))
+
+    # ------------------------------------------------------------------------------ main entry
+    def track(self, frame):
+        t_ns = int(frame.t_ns)
+        self.cur = self._sample(self.index + 1, t_ns)
+        gap = self.t_prev is not None and not np.all(np.isfinite(self.cur.rotvec))
+        gap = gap or not np.all(np.isfinite(self.cur.acc_dir))
+        if self.phase == INIT:
+            self.mode = INIT
+        elif gap:
+            self.mode = VISUAL
+        else:
+            self.mode = GEVI
+            self.tilt_pred = np.array(est.tilt_angles(est.rtilt(*self.tilt) @ est.exp_so3(self.cur.rotvec)))
+            if self.attitude is not None:
+                self.tilt_pred = self._filter_tilt(t_ns)
+        res = super().track(frame)
+        if self.first_kf_index is None and res.keyframe:
+            self.first_kf_index = res.index
+        if self.t_first is None:
+            self.t_first = t_ns
+        self._note_gap(res, gap)
+        if self.phase == INIT:
+            # nothing is final before W is known: the window's poses are re-expressed at initialisation
+            self.pending, res.final = res.final + self.pending, []
+            if res.status == OK:
+                self.init_poses.append((res.index, t_ns, res.T_w_c.copy()))
+            self._try_init(res)
+        elif self.mode == GEVI and res.status != OK:
+            self.tilt = self.tilt_pred  # the gyro carries the attitude over a lost frame
+        elif self.mode == VISUAL:
+            self.tilt = _tilt_of(res.T_w_c[:3, :3], self.R_ic)
+        if self.phase != INIT and self.still:
+            self._update_standstill(res)
+        self.cur.tilt = self.tilt.copy()
+        if res.keyframe or self.kf is None:
+            self._new_window(res)
+        else:
+            self.win.append(self.cur)
+        res.extra = self._state_row(res)
+        self.t_prev = t_ns
+        return res
+
+    def _note_gap(self, res, gap: bool) -> None:
+        if not gap or self.phase == INIT:
+            return
+        if self.gaps and self.gaps[-1]["last_index"] == res.index - 1:
+            g = self.gaps[-1]
+            g["last_index"], g["end_s"], g["frames"] = res.index, res.t_ns * 1e-9, g["frames"] + 1
+        else:
+            self.gaps.append({"first_index": res.index, "last_index": res.index, "start_s": res.t_ns * 1e-9,
+                              "end_s": res.t_ns * 1e-9, "frames": 1})
+
+    def _new_window(self, res) -> None:
+        """The current frame starts the next BCD window (it is the new keyframe)."""
+        self.win = [self.cur]
+        if self.phase == INIT or self.kf is None:
+            return
+        floor = np.radians(self.cfg.fusion.kf_tilt_floor_deg) ** 2
+        cov = self.tilt_cov if np.all(np.isfinite(self.tilt_cov)) else np.eye(2) * floor
+        w, V = np.linalg.eigh(0.5 * (cov + cov.T))
+        self.kf_tilt, self.kf_tilt_cov = self.tilt.copy(), (V * np.maximum(w, floor)) @ V.T
+        # keep R_WK exactly levelled by the keyframe tilt (the 4-DOF model's assumption); the epipolar
+        # BA, when enabled, may have moved its roll/pitch
+        T = self.kf.T_w_k
+        yaw = _yaw_of(T[:3, :3] @ self.R_ic.T)
+        T[:3, :3] = est.rot_z(yaw) @ est.levelling(*self.kf_tilt, self.R_ic)
+
+    def _filter_tilt(self, t_ns: int) -> np.ndarray:
+        a = self.attitude
+        k = max(int(np.searchsorted(a.t_ns, t_ns, side="right")) - 1, 0)
+        return np.array(est.tilt_angles(a.R_WI[k]))
+
+    # ---------------------------------------------------------------------------- pose step
+    def estimate_T_ck(self, m: Matches, frame) -> np.ndarray:
+        if self.mode != GEVI:
+            R, t, fallback = tracked_pose6(m.p, m.cov_unit * self.sigma2, m.q, self.cfg.pnp, self.sigma2, self.camera.f)
+            self.fallbacks += int(fallback)
+            return _make_T(R, t)
+        cov = m.cov_unit * self.sigma2
+        L_k, L_c, _ = self._levelling()
+        psi, t = self._pose4(m, cov, L_k, L_c)
+        if self.cfg.fusion.mode == "bcd":
+            R, t = self._bcd(m, cov, psi, t)
+        else:
+            R = est.rot4(psi, L_k, L_c)
+            self.tilt, self.tilt_cov = self.tilt_pred.copy(), np.full((2, 2), np.nan)
+        med = reprojection_median_px(R, t, m.p, m.q, self.camera.f)
+        if not np.isfinite(med) or med > self.cfg.pnp.max_median_px:
+            raise TrackingFailure(f"median reprojection error {med:.2f} px after the GeVI pose step")
+        return _make_T(R, t)
+
+    def _pose4(self, m: Matches, cov, L_k, L_c):
+        """4-DOF BE (spec 6.2) + one epipolar GN step (6.3) -> (psi, t_ck).
+
+        The linear 4-DOF model is degenerate for a *level* plane (a pool floor): with the vertical
+        coordinate rho_3 = h of every point the same, x = (0, 0, 0, 0, -h) solves A x = b exactly (it
+        maps every point to the camera centre), so with noise the estimate mixes the true and the
+        spurious solution (measured: psi off by pi, all points behind the camera).  As for the 6-DOF
+        step (pose6.estimate_pose6), when the median reprojection error exceeds ``pnp.fallback_sigmas``
+        noise std, the GN step is redone from SQPnP projected on the 4-DOF model and the better kept.
+        """
+        f, pc = self.camera.f, self.cfg.pnp
+        parallax_px = float(np.median(np.linalg.norm(m.q - m.z, axis=1))) * f
+        use_gn = parallax_px >= self.cfg.verify.min_parallax_px  # below: left epipolar lines undefined (t ~ 0)
+
+        def gn(psi, t):
+            if not use_gn:
+                return psi, t
+            return est.pnp4_gn(psi, t, m.z, m.y, m.q, L_k, L_c, self.camera.R_rl, self.camera.t_rl)
+
+        def err(psi, t):
+            return reprojection_median_px(est.rot4(psi, L_k, L_c), t, m.p, m.q, f)
+
+        best, e_best = None, np.inf
+        try:
+            best = gn(*est.pnp4_be(m.p, cov, m.q, L_k, L_c))
+            e_best = err(*best)
+        except est.EstimatorError:
+            pass
+        limit = max(pc.fallback_sigmas * np.sqrt(self.sigma2) * f, pc.fallback_min_px)
+        if e_best > limit and pc.fallback_sigmas > 0:
+            try:
+                R6, t6 = opencv_pnp(m.p, m.q, cv2.SOLVEPNP_SQPNP, refine=False)
+                M = L_c @ R6 @ L_k.T  # = Rz(psi) for an exact 4-DOF pose
+                cand = gn(float(np.arctan2(M[1, 0] - M[0, 1], M[0, 0] + M[1, 1])), t6)
+                e2 = err(*cand)
+                if e2 < e_best:
+                    best, e_best = cand, e2
+                    self.fallbacks += 1
+            except (est.EstimatorError, cv2.error, TrackingFailure):
+                pass
+        if best is None:
+            raise TrackingFailure("4-DOF PnP failed")
+        return best
+
+    def _bcd(self, m: Matches, cov, psi, t):
+        samples = self.win + [self.cur]
+        L_k, L_c, _ = self._levelling()
+        depth = (m.p @ est.rot4(psi, L_k, L_c).T + t)[:, 2]
+        front = depth > 0.5 * self.cfg.triangulation.min_depth_m
+        if front.sum() < self.cfg.pnp.min_points:
+            raise TrackingFailure(f"only {int(front.sum())} points in front of the camera after the 4-DOF step")
+        m = Matches(m.ids[front], m.z[front], m.y[front], m.q[front], m.p[front], m.cov_unit[front])
+        cov = cov[front]
+        acc = np.array([s.acc_dir for s in samples])
+        rot = np.array([s.rotvec for s in samples[1:]])
+        dt = float(np.mean([s.dt for s in samples[1:]])) if len(samples) > 1 else self.frame_period
+        noise = self.imu.noise
+        fc = self.cfg.fusion
+        lo = max((noise.acc_noise_density / np.sqrt(self.frame_period) / GRAVITY) ** 2, 1e-12)
+        tilts0 = np.array([self.kf_tilt] + [s.tilt for s in samples[1:-1]] + [self.tilt_pred])
+        window = est.FusionWindow(p=m.p, cov=cov, q=m.q, sigma2=self.sigma2, R_ic=self.R_ic, acc_dir=acc,
+                                  gyro_inc=rot, gyro_var=noise.gyro_noise_density ** 2 * dt, prior_mean=self.kf_tilt,
+                                  prior_cov=self.kf_tilt_cov, psi0=psi, t0=t, lo=lo, hi=fc.sigma_hi ** 2,
+                                  tilts0=tilts0)
+        t0 = time.perf_counter()
+        try:
+            state, Sigma, _ = est.bcd_refine(window, adaptive=fc.adaptive, max_iter=fc.max_iter, lm_iters=fc.lm_iters)
+        except est.EstimatorError as err:
+            raise TrackingFailure(f"BCD refinement: {err}") from None
+        self.bcd_ms = (time.perf_counter() - t0) * 1e3
+        self.tilt, self.tilt_cov, self.Sigma = state.tilts[-1].copy(), state.cov_last_tilt, Sigma
+        for s, tl in zip(samples[1:-1], state.tilts[1:-1]):
+            s.tilt = tl.copy()
+        return state.R_ck(self.R_ic), state.t
+
+    # ------------------------------------------------------------------------- initialisation
+    def _try_init(self, res) -> None:
+        ic = self.cfg.init
+        t_ns = res.t_ns
+        elapsed = (t_ns - self.t_first) * 1e-9
+        if self.still:
+            ts, g, a = self.imu.window(self.t_first, t_ns)
+            flow_ok = res.index == 0 or (res.status == OK and self.kf is not None and
+                                         self.kf.index == self.first_kf_index and self.last_disp_px <= ic.still_max_flow_px)
+            rest = flow_ok and (len(ts) < 2 or imu_at_rest(g, a, ic.still_max_gyro_std, ic.still_max_acc_std,
+                                                           ic.still_max_gravity_err))
+            if not rest:
+                self.still = False
+            elif elapsed >= ic.still_min_s and len(ts) >= 2:
+                self._initialise_standstill(res, ts, g, a)
+                return
+        if not self.still and elapsed >= ic.window_s:
+            if self.next_init_try is not None and res.index < self.next_init_try:
+                return
+            self._initialise_moving(res, elapsed)
+
+    def _initialise_standstill(self, res, ts, g, a) -> None:
+        self.b_g = g.mean(0)
+        roll, pitch = tilt_from_specific_force(a.mean(0))
+        # V = the first frame's rectified cam0, which is where the platform still is
+        R_WV = est.levelling(roll, pitch, self.R_ic) @ res.T_w_c[:3, :3].T
+        self.init_info = {"method": "standstill", "at_s": (res.t_ns - self.t_first) * 1e-9,
+                          "standstill_s": (ts[-1] - ts[0]) * 1e-9}
+        self._enter_tracking(res, R_WV)
+
+    def _initialise_moving(self, res, elapsed: float) -> None:
+        ic = self.cfg.init
+        poses = self.init_poses[::max(ic.stride, 1)]
+        opts = est.InitOptions(ba_prior_sigma=ic.ba_prior_sigma, acc_noise_density=self.imu.noise.acc_noise_density)
+        try:
+            r = est.stereo_imu_init(np.array([p[1] for p in poses], dtype=np.int64),
+                                    np.array([p[2][:3, :3] for p in poses]), np.array([p[2][:3, 3] for p in poses]),
+                                    self.imu.t_ns, self.imu.gyro, self.imu.acc, self.R_ic, self.p_ic, opts)
+        except est.EstimatorError as err:
+            if elapsed + 0.5 < ic.max_window_s:
+                self.next_init_try = res.index + max(ic.stride, 1) * 5
+                self.init_info = {"failed_attempt": str(err)}
+                return
+            # last resort: gravity from the mean specific force (zero mean acceleration assumed)
+            _, g, a = self.imu.window(self.t_first, res.t_ns)
+            roll, pitch = tilt_from_specific_force(a.mean(0))
+            R_WV = est.levelling(roll, pitch, self.R_ic) @ self.init_poses[0][2][:3, :3].T
+            self.init_info = {"method": "mean-specific-force (stereo-IMU init failed: " + str(err) + ")",
+                              "at_s": elapsed}
+            self._enter_tracking(res, R_WV)
+            return
+        self.b_g, self.b_a = r.b_g.copy(), r.b_a.copy()
+        self.init_info = {"method": "stereo-imu", "at_s": elapsed, "poses": len(poses),
+                          "gravity_norm_linear": r.gravity_norm_linear, "rms_rot": r.rms_rot}
+        self._enter_tracking(res, r.R_WV)
+
+    def _enter_tracking(self, res, R_WV: np.ndarray) -> None:
+        """Re-express everything held in V in the gravity-aligned W; the held poses become final."""
+        T_WV = np.eye(4)
+        T_WV[:3, :3] = R_WV
+        self.pending = [(i, T_WV @ T) for i, T in self.pending]
+        res.T_w_c = T_WV @ res.T_w_c
+        if self.kf is not None:
+            self.kf.T_w_k = T_WV @ self.kf.T_w_k
+        if self.T_w_last is not None:
+            self.T_w_last = T_WV @ self.T_w_last
+        poses = dict(self.pending)
+        self.tilt = _tilt_of(res.T_w_c[:3, :3], self.R_ic)
+        s0 = (self.cfg.init.ba_prior_sigma / GRAVITY) ** 2  # the bias/tilt ambiguity floor (spec 9.6)
+        self.tilt_cov = np.eye(2) * s0
+        if self.kf is not None:
+            self.kf_tilt = _tilt_of(self.kf.T_w_k[:3, :3], self.R_ic)
+            self.kf_tilt_cov = np.eye(2) * s0
+        # the window since the keyframe, re-summarised with the biases now known
+        for s in self.win:
+            fs = self._resample(s)
+            s.acc_dir, s.rotvec = fs.acc_dir, fs.rotvec
+            if s.index in poses:
+                s.tilt = _tilt_of(poses[s.index][:3, :3], self.R_ic)
+        fs = self._resample(self.cur)
+        self.cur.acc_dir, self.cur.rotvec = fs.acc_dir, fs.rotvec
+        self.phase = GEVI
+        if self.cfg.fusion.mode == "4dof":
+            self._start_attitude_filter(res.t_ns)
+        if not self.cfg.ba.enabled:
+            res.final, self.pending = self.pending, []
+
+    def _resample(self, s: FrameSample) -> FrameSample:
+        saved = self.t_prev
+        self.t_prev = s.t_prev_ns
+        try:
+            return self._sample(s.index, s.t_ns)
+        finally:
+            self.t_prev = saved
+
+    def _start_attitude_filter(self, t_ns: int) -> None:
+        ts, g, a = self.imu.window(t_ns, int(self.imu.t_ns[-1]))
+        R0 = est.rtilt(*self.tilt)
+        f = GravityAttitudeFilter(R0, self.b_g, self.imu.noise, self.imu.dt_nominal, AttitudeFilterConfig(),
+                                  b_a=self.b_a)
+        self.attitude = run_filter(f, ts, g, a)
+
+    def _update_standstill(self, res) -> None:
+        """While the starting standstill lasts, the gyro bias is the mean rate over all of it."""
+        ic = self.cfg.init
+        ts, g, a = self.imu.window(self.t_first, res.t_ns)
+        flow_ok = (res.status == OK and self.kf is not None and self.kf.index == self.first_kf_index
+                   and self.last_disp_px <= ic.still_max_flow_px)
+        if flow_ok and imu_at_rest(g, a, ic.still_max_gyro_std, ic.still_max_acc_std, ic.still_max_gravity_err):
+            self.b_g = g.mean(0)
+            self.init_info["standstill_s"] = (ts[-1] - ts[0]) * 1e-9
+        else:
+            self.still = False
+
+    # --------------------------------------------------------------------------------- output
+    def _state_row(self, res) -> dict:
+        phase = self.phase if self.phase == INIT else (BRIDGED_IMU if res.status != OK else self.mode)
+        if phase == GEVI and self.still:
+            phase = STANDSTILL
+        R_wi = res.T_w_c[:3, :3] @ self.R_ic.T
+        S = self.Sigma
+        tilt_std = float(np.sqrt(np.trace(self.tilt_cov) / 2)) if np.all(np.isfinite(self.tilt_cov)) else np.nan
+        return {"index": res.index, "t_ns": res.t_ns, "phase": phase, "roll": float(self.tilt[0]),
+                "pitch": float(self.tilt[1]), "yaw": _yaw_of(R_wi), "bgx": self.b_g[0], "bgy": self.b_g[1],
+                "bgz": self.b_g[2], "bax": self.b_a[0], "bay": self.b_a[1], "baz": self.b_a[2],
+                "sigma_trace": float(np.trace(S)), "s_xx": S[0, 0], "s_yy": S[1, 1], "s_zz": S[2, 2], "s_xy": S[0, 1],
+                "s_xz": S[0, 2], "s_yz": S[1, 2], "tilt_std": tilt_std,
+                "ransac_iters": getattr(self.gevi_verify, "iterations", 0) if self.mode == GEVI else 0}
+
+    def summary(self) -> dict:
+        """What status.json records about the IMU side of the run."""
+        return {"initialisation": self.init_info, "gyro_bias": self.b_g.tolist(), "acc_bias": self.b_a.tolist(),
+                "imu_gaps": self.gaps, "initialised": self.phase != INIT}
