@@ -44,10 +44,10 @@ from gevi_cli.inertial.standstill import GRAVITY, imu_at_rest, tilt_from_specifi
 from gevi_cli.pipelines.config import OdometryConfig
 from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches, _make_T
 from gevi_cli.pipelines.pose6 import opencv_pnp, reprojection_median_px, tracked_pose6
-from gevi_cli.pipelines.types import OK
+from gevi_cli.pipelines.types import INERTIAL, OK
 from gevi_cli.pipelines.verification import FivePointL1Verification, ThreePointVerification, TrackingFailure
 
-INIT, STANDSTILL, GEVI, VISUAL, BRIDGED_IMU = "init", "standstill", "gevi", "visual", "bridged"
+INIT, STANDSTILL, GEVI, VISUAL = "init", "standstill", "gevi", "visual"
 
 #: imu_states.csv columns (angles rad, biases rad/s and m/s^2, Sigma dimensionless unit-vector variance)
 STATE_COLUMNS = ("index", "t_ns", "phase", "roll", "pitch", "yaw", "bgx", "bgy", "bgz", "bax", "bay", "baz",
@@ -115,6 +115,8 @@ class GeviOdometry(KeyframeOdometry):
         self.gaps: list[dict] = []  # IMU gaps: {"first_index", "start_ns", "end_ns", "frames"}
         self.attitude = None  # AttitudeTrack of the IMU-only filter (fusion.mode = 4dof)
         self.bcd_ms = 0.0
+        self.v_W = np.zeros(3)  # body velocity in W (m/s): from the visual track, carried by the IMU over losses
+        self.track_hist: list[tuple[int, np.ndarray]] = []  # (t_ns, body position in W) of recent OK frames
 
     # --------------------------------------------------------------------------------- helpers
     def _levelling(self):
@@ -169,12 +171,19 @@ class GeviOdometry(KeyframeOdometry):
             if res.status == OK:
                 self.init_poses.append((res.index, t_ns, res.T_w_c.copy()))
             self._try_init(res)
+        elif self.mode == GEVI and res.status == INERTIAL:
+            self.tilt = _tilt_of(res.T_w_c[:3, :3], self.R_ic)  # the gyro carried the attitude
         elif self.mode == GEVI and res.status != OK:
             self.tilt = self.tilt_pred  # the gyro carries the attitude over a lost frame
         elif self.mode == VISUAL:
             self.tilt = _tilt_of(res.T_w_c[:3, :3], self.R_ic)
         if self.phase != INIT and self.still:
             self._update_standstill(res)
+        if self.phase != INIT:
+            if self.still:
+                self.v_W = np.zeros(3)
+            elif res.status != INERTIAL:
+                self._update_velocity(res)
         self.cur.tilt = self.tilt.copy()
         if res.keyframe or self.kf is None:
             self._new_window(res)
@@ -183,6 +192,43 @@ class GeviOdometry(KeyframeOdometry):
         res.extra = self._state_row(res)
         self.t_prev = t_ns
         return res
+
+    def _bridge(self, t_ns: int):
+        """A frame that cannot be tracked visually: at rest while the IMU shows the starting standstill,
+        else IMU preintegration from the last pose and velocity (constant velocity where the IMU has a gap)."""
+        if self.T_w_last is None:
+            return super()._bridge(t_ns)
+        if self.still and (self.phase != INIT or self.kf is None):
+            return self.T_w_last.copy(), INERTIAL
+        if self.phase == INIT or self.t_prev is None or not self.imu.covers(self.t_prev, t_ns):
+            return super()._bridge(t_ns)
+        from gevi_cli.estimators.preintegration import imu_segment, preintegrate
+
+        g, a, dts = imu_segment(self.imu.t_ns, self.imu.gyro, self.imu.acc, self.t_prev, t_ns)
+        pre = preintegrate(g, a, dts, self.b_g, self.b_a)
+        T_B_C = np.asarray(self.camera.T_B_C0, dtype=float)
+        T_wb = self.T_w_last @ np.linalg.inv(T_B_C)
+        R, p, T = T_wb[:3, :3], T_wb[:3, 3], pre.dt
+        g_W = np.array([0.0, 0.0, -GRAVITY])
+        T_new = np.eye(4)
+        T_new[:3, :3] = R @ pre.dR
+        T_new[:3, 3] = p + self.v_W * T + 0.5 * g_W * T * T + R @ pre.dp
+        self.v_W = self.v_W + g_W * T + R @ pre.dv
+        return T_new @ T_B_C, INERTIAL
+
+    def _update_velocity(self, res) -> None:
+        """Velocity from a line fit to the body positions of the last ~0.5 s of tracked frames."""
+        if res.status != OK:
+            self.track_hist = []
+            return
+        T_B_C = np.asarray(self.camera.T_B_C0, dtype=float)
+        p = (res.T_w_c @ np.linalg.inv(T_B_C))[:3, 3]
+        self.track_hist = [h for h in self.track_hist if res.t_ns - h[0] <= 5e8] + [(res.t_ns, p)]
+        if len(self.track_hist) >= 3 and (self.track_hist[-1][0] - self.track_hist[0][0]) >= 1.5e8:
+            t = np.array([h[0] for h in self.track_hist], dtype=np.float64) * 1e-9
+            P = np.array([h[1] for h in self.track_hist])
+            tc = t - t.mean()
+            self.v_W = (tc @ (P - P.mean(0))) / (tc @ tc)
 
     def _note_gap(self, res, gap: bool) -> None:
         if not gap or self.phase == INIT:
@@ -315,8 +361,10 @@ class GeviOdometry(KeyframeOdometry):
         elapsed = (t_ns - self.t_first) * 1e-9
         if self.still:
             ts, g, a = self.imu.window(self.t_first, t_ns)
-            flow_ok = res.index == 0 or (res.status == OK and self.kf is not None and
-                                         self.kf.index == self.first_kf_index and self.last_disp_px <= ic.still_max_flow_px)
+            # no keyframe yet (textureless start): the images say nothing and the IMU decides
+            flow_ok = res.index == 0 or self.first_kf_index is None or (
+                res.status == OK and self.kf is not None and self.kf.index == self.first_kf_index
+                and self.last_flow_px <= ic.still_max_flow_px)
             rest = flow_ok and (len(ts) < 2 or imu_at_rest(g, a, ic.still_max_gyro_std, ic.still_max_acc_std,
                                                            ic.still_max_gravity_err))
             if not rest:
@@ -414,8 +462,8 @@ class GeviOdometry(KeyframeOdometry):
         """While the starting standstill lasts, the gyro bias is the mean rate over all of it."""
         ic = self.cfg.init
         ts, g, a = self.imu.window(self.t_first, res.t_ns)
-        flow_ok = (res.status == OK and self.kf is not None and self.kf.index == self.first_kf_index
-                   and self.last_disp_px <= ic.still_max_flow_px)
+        flow_ok = self.first_kf_index is None or (res.status == OK and self.kf is not None and self.kf.index ==
+                                                  self.first_kf_index and self.last_flow_px <= ic.still_max_flow_px)
         if flow_ok and imu_at_rest(g, a, ic.still_max_gyro_std, ic.still_max_acc_std, ic.still_max_gravity_err):
             self.b_g = g.mean(0)
             self.init_info["standstill_s"] = (ts[-1] - ts[0]) * 1e-9
@@ -424,7 +472,7 @@ class GeviOdometry(KeyframeOdometry):
 
     # --------------------------------------------------------------------------------- output
     def _state_row(self, res) -> dict:
-        phase = self.phase if self.phase == INIT else (BRIDGED_IMU if res.status != OK else self.mode)
+        phase = self.phase if self.phase == INIT else (res.status if res.status != OK else self.mode)
         if phase == GEVI and self.still:
             phase = STANDSTILL
         R_wi = res.T_w_c[:3, :3] @ self.R_ic.T

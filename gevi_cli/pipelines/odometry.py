@@ -101,7 +101,7 @@ class KeyframeOdometry:
         self._last = None  # (p, q) of the last tracked frame's verified matches
         self.ba_rejected = 0
         self.fallbacks = 0  # frames whose 6-DOF pose step started from SQPnP instead of Bias-Eli
-        self.last_disp_px = 0.0  # mean keyframe -> current displacement of the verified matches (px)
+        self.last_flow_px = 0.0  # median keyframe -> current displacement of the verified matches (px)
 
     # ------------------------------------------------------------------ to be provided by pipelines
     def estimate_T_ck(self, m: Matches, frame) -> np.ndarray:  # pragma: no cover - abstract
@@ -132,8 +132,8 @@ class KeyframeOdometry:
         elif T_ck is not None:
             res.T_w_c = self.kf.T_w_k @ invert_pose(T_ck)
         else:
-            res.T_w_c = (self.T_w_last if self.T_w_last is not None else np.eye(4)) @ self.velocity
-            res.status, res.message = BRIDGED, failure
+            res.T_w_c, res.status = self._bridge(res.t_ns)
+            res.message = failure
         res.sigma_px = float(np.sqrt(self.sigma2) * self.camera.f)
 
         decision = self.frontend.keyframe_decision(frame)
@@ -159,6 +159,10 @@ class KeyframeOdometry:
         self.T_w_last = T_now
         res.timings = timings
         return res
+
+    def _bridge(self, t_ns: int) -> tuple[np.ndarray, str]:
+        """Pose of a frame that could not be tracked: constant velocity from the last pose (``bridged``)."""
+        return (self.T_w_last if self.T_w_last is not None else np.eye(4)) @ self.velocity, BRIDGED
 
     def finish(self) -> list[tuple[int, np.ndarray]]:
         """Poses still pending (their window never closed): final as tracked."""
@@ -207,8 +211,9 @@ class KeyframeOdometry:
         timings["noise"] = t2 - t1
         T_ck = self.estimate_T_ck(m, frame)
         timings["pose"] = time.perf_counter() - t2
-        disp_px = float(np.mean(np.linalg.norm(m.q - m.z, axis=1))) * self.camera.f
-        self.last_disp_px = disp_px
+        disp = np.linalg.norm(m.q - m.z, axis=1) * self.camera.f
+        disp_px = float(np.mean(disp))
+        self.last_flow_px = float(np.median(disp))
         self._last = (m.p, m.q)
         return T_ck, n_match, len(m.ids), disp_px
 

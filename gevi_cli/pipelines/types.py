@@ -6,6 +6,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 OK, BRIDGED, LOST = "ok", "bridged", "lost"
+#: GeVI: the frame could not be tracked visually, its pose comes from the IMU alone (preintegration
+#: from the last pose and velocity, or "at rest" during a standstill the IMU shows)
+INERTIAL = "inertial"
 
 
 @dataclass
@@ -14,7 +17,8 @@ class FrameResult:
 
     ``T_w_c`` (4x4) is the *online* pose of rectified cam0 in the world frame (= the first
     keyframe's rectified cam0), as known when the frame was tracked.  ``status`` is ``ok``, or
-    ``bridged`` when the pose could not be estimated and was extrapolated at constant velocity.
+    ``bridged`` when the pose could not be estimated and was extrapolated at constant velocity, or
+    ``inertial`` when it could not be tracked visually and the IMU carried it (GeVI).
     ``final`` lists ``(index, T_w_c)`` poses that will not change any more (after the local BA of the
     window they belong to, or immediately without BA); every frame appears there exactly once over a
     run (the last ones on ``Odometry.finish()``).

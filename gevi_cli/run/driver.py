@@ -14,7 +14,7 @@ import numpy as np
 
 from gevi_cli.errors import DataError
 from gevi_cli.geometry import invert_pose
-from gevi_cli.pipelines.types import BRIDGED
+from gevi_cli.pipelines.types import BRIDGED, INERTIAL
 from gevi_cli.run.folder import PoseStream, RunStatus, write_status
 
 #: timing.csv columns (ms); the front-end sub-stages are part of "frontend" and "keyframe".
@@ -138,6 +138,8 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
                 lost_open[3] += 1
             else:
                 status.frames_tracked += 1
+                if res.status == INERTIAL:
+                    status.inertial_frames.append(index)
                 close_lost(res.t_ns)
             bar.update(1)
             if progress and status.frames_done % 10 == 0:

@@ -73,6 +73,7 @@ class RunStatus:
     pose_fallbacks: int = 0  # frames whose pose step started from SQPnP (coplanar points)
     lost_intervals: list = field(default_factory=list)  # {"start_s", "end_s", "frames", "first_index", "reason"}
     bridged_frames: list = field(default_factory=list)  # frame indices bridged at constant velocity
+    inertial_frames: list = field(default_factory=list)  # GeVI: not tracked visually, carried by the IMU alone
     skipped_frames: list = field(default_factory=list)  # unreadable frames: {"index", "reason"}
     message: str = ""
     gevi_version: str = ""

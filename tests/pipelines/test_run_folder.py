@@ -36,7 +36,7 @@ def test_interrupt_or_crash_keeps_every_final_pose(render, tmp_path, monkeypatch
     from gevi_cli.cli import main
 
     with pytest.raises(BaseException) as info:
-        main(["run", str(render), "-o", str(out), "-q"])
+        main(["run", str(render), "--method", "cfo", "-o", str(out), "-q"])
     if exc is KeyboardInterrupt:
         assert isinstance(info.value, SystemExit) and info.value.code == code
     else:
@@ -52,7 +52,7 @@ def test_interrupt_or_crash_keeps_every_final_pose(render, tmp_path, monkeypatch
 def test_eval_reads_a_results_tree_of_run_folders(render, tmp_path, capsys):
     root = tmp_path / "results"
     for _ in range(2):  # two timestamped runs = two trials, the `latest` link is not a third
-        code, out, _ = run_cli(["run", render, "--results-root", root, "-q", "--max-frames", "20"], capsys)
+        code, out, _ = run_cli(["run", render, "--method", "cfo", "--results-root", root, "-q", "--max-frames", "20"], capsys)
         assert code == 0
     seq_dir = root / "cfo" / "pool-easy"
     assert (seq_dir / "latest").is_symlink()

@@ -55,5 +55,3 @@ def test_not_a_sequence(tmp_path, capsys):
     assert code == 2 and err.count("\n") == 1 and str(tmp_path) in err
     code, _, err = run_cli(["run", tmp_path / "missing"], capsys)
     assert code == 2 and "no such file or folder" in err
-    code, _, err = run_cli(["run"], capsys)
-    assert code == 2 and "SEQUENCE" in err
