@@ -294,6 +294,28 @@ def _evaluate(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status, ec
             status.evaluation.update(ev)
         else:
             status.evaluation[align] = ev
+    if req.method == "gevi":
+        _evaluate_tilt(run_dir, gt, status, echo)
+
+
+def _evaluate_tilt(run_dir: Path, gt, status, echo) -> None:
+    """Roll/pitch error of the body trajectory against a gravity-aligned ground truth (no alignment)."""
+    from gevi_cli.evaluation.inputs import load_groundtruth
+    from gevi_cli.evaluation.tilt import tilt_errors
+    from gevi_cli.trajectory import read_trajectory
+
+    try:
+        gt_traj, _ = load_groundtruth(Path(gt))
+        te = tilt_errors(read_trajectory(run_dir / status.primary, frame="body"), gt_traj)
+    except GeviError as err:
+        echo(f"roll/pitch not evaluated: {err.one_line()}")
+        return
+    if len(te.err_deg) == 0:
+        return
+    status.evaluation["tilt_rmse_deg"] = te.rmse_deg
+    status.evaluation["tilt_max_deg"] = float(te.err_deg.max())
+    echo(f"roll/pitch error {te.rmse_deg:.3f} deg RMSE, {te.err_deg.max():.3f} deg max (gravity direction, "
+         "no alignment; needs a gravity-aligned ground truth)")
 
 
 def _evaluate_one(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status, align: str, out: Path, echo) -> dict:

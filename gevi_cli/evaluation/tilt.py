@@ -1,0 +1,48 @@
+"""Roll/pitch (tilt) error of a gravity-aligned estimate: what a stereo-inertial odometry must keep.
+
+Both trajectories must have a gravity-aligned world (z up) and describe the same sensor frame; no
+alignment is applied (a rotation about z would not change the tilt, any other would hide the very
+error measured).  The tilt error of a pose pair is the angle between the two gravity directions
+seen from the sensor, ``angle(R_est^T e3, R_gt^T e3)``: yaw-free and free of the Euler singularity
+of roll/pitch differences near pitch +-90 deg.  Degrees.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from gevi_cli.trajectory import Trajectory
+
+E3 = np.array([0.0, 0.0, 1.0])
+
+
+@dataclass(frozen=True)
+class TiltErrors:
+    """Per matched pose: stamps (ns) and tilt error (deg)."""
+
+    t_ns: np.ndarray
+    err_deg: np.ndarray
+
+    @property
+    def rmse_deg(self) -> float:
+        return float(np.sqrt(np.mean(self.err_deg ** 2)))
+
+    def window_rmse_deg(self, t0_ns: int, t1_ns: int) -> float:
+        m = (self.t_ns >= t0_ns) & (self.t_ns <= t1_ns)
+        return float(np.sqrt(np.mean(self.err_deg[m] ** 2))) if m.any() else float("nan")
+
+
+def gravity_angle_deg(R_est: np.ndarray, R_ref: np.ndarray) -> np.ndarray:
+    """Angle (deg) between R_est^T e3 and R_ref^T e3 for (n, 3, 3) arrays."""
+    a = np.einsum("nji,j->ni", R_est, E3)
+    b = np.einsum("nji,j->ni", R_ref, E3)
+    return np.degrees(np.arccos(np.clip(np.sum(a * b, axis=1), -1.0, 1.0)))
+
+
+def tilt_errors(est: Trajectory, gt: Trajectory, max_diff_s: float = 0.01) -> TiltErrors:
+    """Tilt error of every estimated pose with a ground-truth pose within ``max_diff_s``."""
+    from gevi_cli.evaluation.associate import associate
+
+    a = associate(gt, est, max_diff_s=max_diff_s)
+    return TiltErrors(a.est.t_ns.copy(), gravity_angle_deg(a.est.rotations, a.gt.rotations))
