@@ -20,7 +20,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "convert": ("gevi_cli.commands.convert", "Convert a trajectory file between TUM, EuRoC csv and KITTI formats."),
     "eval": ("gevi_cli.commands.eval", "ATE/RPE/KITTI tables and plots of estimates against ground truth."),
     "simulate": ("gevi_cli.commands.simulate", "Render a synthetic stereo-IMU sequence with exact ground truth."),
-    "run": ("gevi_cli.commands.run", "Run odometry (CurrentFeature) on a sequence and evaluate it."),
+    "run": ("gevi_cli.commands.run", "Run odometry (GeVI stereo-inertial or CurrentFeature stereo) and evaluate it."),
+    "imu": ("gevi_cli.commands.imu", "IMU report: rate, gaps, standstills, biases, noise, roll/pitch over the stream."),
 }
 
 EPILOG = """\b
@@ -30,7 +31,9 @@ Examples:
   gevi convert estimate.csv estimate.tum --to tum
   gevi simulate --sample
   gevi eval --gt groundtruth.csv -e ours=traj.tum -e orbslam3=f_dataset.txt
+  gevi run                     # GeVI on the built-in pool-easy sample
   gevi run ../shared/data/kitti06_head/dataset/sequences/06 --method cfo
+  gevi imu ../shared/data/euroc_micro --gt ../shared/data/euroc_micro/groundtruth/V1_01_easy.csv
 """
 
 

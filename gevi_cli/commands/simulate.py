@@ -54,14 +54,17 @@ def _resolution(value: str | None):
 @click.option("--no-image-noise", is_flag=True, help="No shot/read noise in the images.")
 @click.option("--supersample", type=click.IntRange(1, 8), default=2, show_default=True,
               help="Sub-samples per pixel and axis (anti-aliasing).")
+@click.option("--a-max", type=click.FloatRange(min=0.001), default=None,
+              help="Peak acceleration of the hovering presets [m/s^2] (default: the preset's).")
+@click.option("--moving-start", is_flag=True, help="Hovering presets: in motion from the first frame (no still start).")
 @click.option("--workers", type=click.IntRange(1, 64), help="Render processes [min(2, CPUs)].")
 @click.option("--name", help="Bag base name for --format bag [preset name].")
 @click.option("--overwrite", is_flag=True, help="Replace OUT_DIR if it is a previous gevi simulate output.")
 @click.option("--sample", is_flag=True, help="Print the path of the built-in pool-easy sample, rendering it if missing.")
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 def command(preset, out_dir, fmt, duration, rate, resolution, baseline, seed, imu_rate, gyro_noise, gyro_walk,
-            acc_noise, acc_walk, no_imu_noise, no_distortion, no_image_noise, supersample, workers, name, overwrite,
-            sample, quiet):
+            acc_noise, acc_walk, no_imu_noise, no_distortion, no_image_noise, supersample, a_max, moving_start, workers,
+            name, overwrite, sample, quiet):
     """Render a synthetic stereo-IMU sequence with exact ground truth.
 
     PRESET is one of pool-easy, pool-hard, euroc-like, kitti-like; OUT_DIR is created (it must not
@@ -93,6 +96,6 @@ def command(preset, out_dir, fmt, duration, rate, resolution, baseline, seed, im
         imu = imu.noise_free()
     config = SimulationConfig(preset, seed=seed, duration_s=duration, rate_hz=rate, resolution=res,
                               baseline_m=baseline, distortion=not no_distortion, image_noise=not no_image_noise,
-                              imu=imu, supersample=supersample)
+                              imu=imu, supersample=supersample, a_max=a_max, moving_start=moving_start)
     result = simulate(config, out_dir, fmt, overwrite=overwrite, name=name, progress=not quiet, workers=workers)
     click.echo(str(result))

@@ -43,12 +43,15 @@ from .lie import (
 )
 
 
-def sigma_step(residuals, lo, hi) -> np.ndarray:
+def sigma_step(residuals, lo, hi, prior_scatter=None, prior_dof: float = 0.0) -> np.ndarray:
     """Closed-form minimiser of tr(Sigma^-1 S) + K log det Sigma s.t. lo <= eig(Sigma) <= hi.
 
     ``residuals`` (K, 3): gravity-prior residuals a_k - R_tilt_k^T e3 (unit-vector differences,
     dimensionless). With S = sum r r^T = V diag(s) V^T the minimiser is
     V diag(clip(s / K, lo, hi)) V^T (spec 8.3). [PROPOSAL] lo = (sigma_a / g)^2, hi = 0.2^2.
+    With the conjugate (Wishart-type) prior of spec 8.3 [PROPOSAL], ``prior_scatter`` Psi0 (3, 3) and
+    ``prior_dof`` nu0, the objective gains tr(Sigma^-1 Psi0) + nu0 log det Sigma and the minimiser is
+    clip((S + Psi0) / (K + nu0)).
     """
     r = as_points(residuals, 3, "residuals")
     K = len(r)
@@ -57,7 +60,11 @@ def sigma_step(residuals, lo, hi) -> np.ndarray:
     hi = finite_scalar(hi, "hi")
     if not 0 < lo <= hi:
         raise DegenerateInput("sigma_step needs 0 < lo <= hi")
-    s, V = np.linalg.eigh(r.T @ r)
+    S = r.T @ r
+    if prior_scatter is not None and prior_dof > 0:
+        S = S + as_matrix(prior_scatter, (3, 3), "prior_scatter")
+        K = K + float(prior_dof)
+    s, V = np.linalg.eigh(S)
     return (V * np.clip(s / K, lo, hi)) @ V.T
 
 
@@ -89,6 +96,8 @@ class FusionWindow:
     Prior: keyframe roll/pitch ``prior_mean`` (2,) and ``prior_cov`` (2, 2) (rad, rad^2), e.g. the
     previous window's last tilt and :attr:`FusionState.cov_last_tilt`.
     ``lo``/``hi``: eigenvalue bounds of Sigma_imu [PROPOSAL lo = (sigma_a/g)^2, hi = 0.2^2].
+    ``sigma_prior``/``sigma_prior_dof``: conjugate prior on Sigma_imu (spec 8.3 [PROPOSAL]; the joint
+    objective gains nu0 (tr(Sigma^-1 sigma_prior) + log det Sigma)).
     Initial relative pose ``psi0``/``t0`` (spec 6); ``tilts0`` (K, 2) defaults to gyro propagation
     from ``prior_mean``.
     """
@@ -108,6 +117,8 @@ class FusionWindow:
     lo: float
     hi: float = 0.2**2
     tilts0: np.ndarray | None = None
+    sigma_prior: np.ndarray | None = None  # Psi0 / nu0: the prior guess of Sigma_imu (e.g. from recent innovations)
+    sigma_prior_dof: float = 0.0  # nu0, its weight in residual-equivalents (0: no prior, the plain spec 8.3)
 
 
 @dataclass
@@ -320,12 +331,22 @@ def _check_window(w: FusionWindow) -> FusionWindow:
         p=p, cov=cov, q=q, sigma2=s2, R_ic=as_matrix(w.R_ic, (3, 3), "R_ic"), acc_dir=acc, gyro_inc=gyr,
         gyro_var=gv, prior_mean=as_matrix(w.prior_mean, (2,), "prior_mean"),
         prior_cov=as_matrix(w.prior_cov, (2, 2), "prior_cov"), psi0=finite_scalar(w.psi0, "psi0"),
-        t0=as_matrix(w.t0, (3,), "t0"), lo=lo, hi=hi, tilts0=tilts0)
+        t0=as_matrix(w.t0, (3,), "t0"), lo=lo, hi=hi, tilts0=tilts0,
+        sigma_prior=None if w.sigma_prior is None else as_matrix(w.sigma_prior, (3, 3), "sigma_prior"),
+        sigma_prior_dof=finite_scalar(w.sigma_prior_dof, "sigma_prior_dof"))
 
 
-def _sigma_parts(Sigma):
+def _sigma_parts(Sigma, w: FusionWindow | None = None):
+    """(L^-1, the Sigma-only part of J per residual count: log det Sigma [+ prior terms / K])."""
     Lc = np.linalg.cholesky(Sigma)
-    return np.linalg.inv(Lc), 2.0 * float(np.sum(np.log(np.diag(Lc))))
+    Linv = np.linalg.inv(Lc)
+    logdet = 2.0 * float(np.sum(np.log(np.diag(Lc))))
+    if w is not None and w.sigma_prior is not None and w.sigma_prior_dof > 0:
+        K = len(w.acc_dir)
+        nu = w.sigma_prior_dof
+        # K * returned value = K log det + nu (tr(Sigma^-1 Sigma_prior) + log det)
+        logdet += nu * (float(np.trace(Linv @ w.sigma_prior @ Linv.T)) + logdet) / K
+    return Linv, logdet
 
 
 def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm_iters=2, mu0=1e-4):
@@ -342,7 +363,7 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
     x = np.r_[w.psi0, w.t0, tilts0.ravel()]
     prob = _Problem(w, _chol2_inv(_vis_covariance(w, x)))
     Sigma = w.lo * np.eye(3)
-    Linv, logdet = _sigma_parts(Sigma)
+    Linv, logdet = _sigma_parts(Sigma, w)
     r, ri, J = prob.evaluate(x, Linv)
     if r is None:
         raise DegenerateInput("bcd_refine: invalid initial estimate")
@@ -379,8 +400,9 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
         if adaptive:
             # exact block minimiser; a recomputed cost above the old one can only be rounding
             # (same Sigma up to 1e-16), in which case the old Sigma is kept
-            Sig_n = sigma_step(ri, w.lo, w.hi)
-            Linv_n, logdet_n = _sigma_parts(Sig_n)
+            Sig_n = sigma_step(ri, w.lo, w.hi, w.sigma_prior * w.sigma_prior_dof if w.sigma_prior is not None else None,
+                               w.sigma_prior_dof)
+            Linv_n, logdet_n = _sigma_parts(Sig_n, w)
             r_n, ri_n, J_n = prob.evaluate(x, Linv_n)
             c_n = float(r_n @ r_n) + K * logdet_n
             if c_n <= cost:
@@ -408,7 +430,7 @@ def joint_cost(window: FusionWindow, state: FusionState, Sigma, x_init=None) -> 
         tilts0 = propagate_tilts(w.prior_mean, w.gyro_inc) if w.tilts0 is None else w.tilts0
         x_init = np.r_[w.psi0, w.t0, tilts0.ravel()]
     prob = _Problem(w, _chol2_inv(_vis_covariance(w, x_init)))
-    Linv, logdet = _sigma_parts(np.asarray(Sigma, float))
+    Linv, logdet = _sigma_parts(np.asarray(Sigma, float), w)
     r, _, _ = prob.evaluate(state.as_vector(), Linv, jac=False)
     if r is None:
         return np.inf

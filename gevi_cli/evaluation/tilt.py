@@ -23,10 +23,16 @@ class TiltErrors:
 
     t_ns: np.ndarray
     err_deg: np.ndarray
+    roll_pitch_deg: np.ndarray  # (n, 2) wrapped roll and pitch differences (ZYX Euler, spec 1)
 
     @property
     def rmse_deg(self) -> float:
         return float(np.sqrt(np.mean(self.err_deg ** 2)))
+
+    @property
+    def roll_pitch_rmse_deg(self) -> float:
+        """RMS over roll and pitch differences (amplified near pitch +-90 deg, where roll is ill-defined)."""
+        return float(np.sqrt(np.mean(self.roll_pitch_deg ** 2)))
 
     def window_rmse_deg(self, t0_ns: int, t1_ns: int) -> float:
         m = (self.t_ns >= t0_ns) & (self.t_ns <= t1_ns)
@@ -44,5 +50,9 @@ def tilt_errors(est: Trajectory, gt: Trajectory, max_diff_s: float = 0.01) -> Ti
     """Tilt error of every estimated pose with a ground-truth pose within ``max_diff_s``."""
     from gevi_cli.evaluation.associate import associate
 
+    from gevi_cli.estimators.lie import tilt_angles, wrap_angle
+
     a = associate(gt, est, max_diff_s=max_diff_s)
-    return TiltErrors(a.est.t_ns.copy(), gravity_angle_deg(a.est.rotations, a.gt.rotations))
+    Re, Rg = a.est.rotations, a.gt.rotations
+    d = np.stack([wrap_angle(x - y) for x, y in zip(tilt_angles(Re), tilt_angles(Rg))], axis=1)
+    return TiltErrors(a.est.t_ns.copy(), gravity_angle_deg(Re, Rg), np.degrees(d))

@@ -139,6 +139,11 @@ class FusionConfig:
     lm_iters: int = opt(2, "LM iterations per chi-step")
     sigma_hi: float = opt(0.2, "upper bound of the gravity-prior std (sqrt of the largest eigenvalue)")
     kf_tilt_floor_deg: float = opt(0.05, "lower bound of the keyframe roll/pitch prior std (deg)")
+    kf_tilt_gravity_gain: float = opt(1.0, "with the BA: new keyframe tilt = BA tilt + gain x (BCD tilt - BA tilt); 1: "
+                                           "the BCD tilt (gravity-anchored), 0: the BA tilt (visual) [PROPOSAL]")
+    sigma_memory_s: float = opt(2.0, "conjugate prior of the gravity-prior covariance from the innovations (specific "
+                                     "force against the gyro-predicted tilt) of the last this many seconds, weighted "
+                                     "as that many residuals [PROPOSAL, spec 8.3]; 0: window residuals only")
 
 
 @dataclass

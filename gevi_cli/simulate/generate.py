@@ -49,6 +49,8 @@ class SimulationConfig:
         image_noise: add shot/read noise to the images.
         imu: IMU rate and noise model.
         supersample: sub-samples per pixel and axis.
+        a_max: peak acceleration of hovering presets [m/s^2] (None: the preset's).
+        moving_start: hovering presets start in full motion (no still start, no ramp).
     """
 
     preset: str
@@ -61,6 +63,8 @@ class SimulationConfig:
     image_noise: bool = True
     imu: ImuParams | None = None
     supersample: int = 2
+    a_max: float | None = None
+    moving_start: bool = False
 
     @property
     def spec(self) -> PresetSpec:
@@ -241,6 +245,9 @@ class SimulatedSequence:
                 "duration_s": c.duration_s, "rate_hz": c.rate_hz, "resolution": list(c.resolution),
                 "baseline_m": c.baseline_m, "distortion": bool(c.distortion), "image_noise": bool(c.image_noise),
                 "supersample": int(c.supersample),
+                # only when set, so that default renders keep their exact simulation.yaml
+                **({"a_max": float(c.a_max)} if c.a_max is not None else {}),
+                **({"moving_start": True} if c.moving_start else {}),
             },
             "imu": imu,
             "sensor": asdict(self.sensor),
@@ -276,7 +283,7 @@ def build_sequence(config: SimulationConfig) -> SimulatedSequence:
     if not c.distortion:
         cam = replace(cam, distortion=(0.0, 0.0, 0.0, 0.0))
     rig = build_rig(spec, cam, c.baseline_m)
-    motion = build_motion(spec, c.seed, c.duration_s)
+    motion = build_motion(spec, c.seed, c.duration_s, a_max=c.a_max, moving_start=c.moving_start)
     return SimulatedSequence(c, rig, motion, lambda: build_scene(spec, c.seed, motion, c.duration_s))
 
 

@@ -172,8 +172,12 @@ def _motion_horizon(duration: float) -> float:
     return max(float(duration), 120.0)
 
 
-def build_motion(spec: PresetSpec, seed: int, duration: float):
-    """The body trajectory of ``spec`` for ``seed``; independent of ``duration`` up to 120 s."""
+def build_motion(spec: PresetSpec, seed: int, duration: float, a_max: float | None = None, moving_start: bool = False):
+    """The body trajectory of ``spec`` for ``seed``; independent of ``duration`` up to 120 s.
+
+    ``a_max`` overrides the hovering presets' peak acceleration [m/s^2]; ``moving_start`` drops their
+    still start and ramp (in motion from t = 0).  Both leave the random draws unchanged.
+    """
     rng = np.random.default_rng([int(seed), 1001])
     mp = spec.motion
     if isinstance(mp, CarParams):
@@ -185,12 +189,12 @@ def build_motion(spec: PresetSpec, seed: int, duration: float):
         pos.append(Sines(slow.amp + fast.amp, slow.freq + fast.freq, slow.phase + fast.phase))
     ang = [Sines.random(rng, np.radians(a), mp.angle_periods, 3) for a in mp.angles_deg]
     warp = TimeWarp(1.0, mp.warp_ratio, mp.warp_period, float(rng.uniform(0, 2 * np.pi)))
-    step = Smoothstep(mp.still_s, mp.still_s + mp.ramp_s)
+    step = Smoothstep(-2.0, -1.0) if moving_start else Smoothstep(mp.still_s, mp.still_s + mp.ramp_s)
     euler0 = (np.radians(mp.yaw0_deg), float(rng.uniform(-0.03, 0.03)), float(rng.uniform(-0.03, 0.03)))
     motion = HoverMotion((0.0, 0.0, mp.z0), euler0, tuple(pos), tuple(ang), warp, step)
     horizon = _motion_horizon(duration)
     # scale the position signal to the target peak acceleration
-    k = mp.a_max / max_acceleration(motion, horizon)
+    k = (mp.a_max if a_max is None else float(a_max)) / max_acceleration(motion, horizon)
     motion = motion.with_position_scale(k)
     # keep the path inside the box: centre it, shrink if too wide
     t = np.arange(0.0, horizon, 0.05)

@@ -111,6 +111,13 @@ def _write_rows(path: Path, header: str, t_ns: np.ndarray, cols: np.ndarray) -> 
     path.write_text("\n".join(lines) + "\n")
 
 
+def write_groundtruth_csv(seq, path: Path) -> None:
+    """``state_groundtruth_estimate0/data.csv``: body poses, velocities and IMU biases at the IMU stamps."""
+    imu, gt = seq.imu, seq.groundtruth
+    _write_rows(path, GT_HEADER, imu.t_ns,
+                np.hstack([gt.p_W, matrix_to_quat_wxyz(gt.R_WB), gt.v_W, imu.bias_gyro, imu.bias_acc]))
+
+
 def write_euroc(seq, out: Path, progress: bool = True, workers: int | None = None) -> Path:
     """Write ``seq`` (a :class:`~gevi_cli.simulate.generate.SimulatedSequence`) below ``out``; returns ``out``."""
     out = Path(out)
@@ -128,11 +135,8 @@ def write_euroc(seq, out: Path, progress: bool = True, workers: int | None = Non
     (mav / "imu0" / "sensor.yaml").write_text(imu_yaml(c.imu, f"{tag} IMU"))
     imu = seq.imu
     _write_rows(mav / "imu0" / "data.csv", IMU_HEADER, imu.t_ns, np.hstack([imu.gyro, imu.acc]))
-    gt = seq.groundtruth
-    q = matrix_to_quat_wxyz(gt.R_WB)
     (mav / "state_groundtruth_estimate0" / "sensor.yaml").write_text(gt_yaml())
-    _write_rows(mav / "state_groundtruth_estimate0" / "data.csv", GT_HEADER, imu.t_ns,
-                np.hstack([gt.p_W, q, gt.v_W, imu.bias_gyro, imu.bias_acc]))
+    write_groundtruth_csv(seq, mav / "state_groundtruth_estimate0" / "data.csv")
     if seq.spec.mocap:
         (mav / "mocap0").mkdir(exist_ok=True)
         t_m, T_m = seq.mocap

@@ -1,0 +1,40 @@
+"""`gevi imu SEQUENCE`: the IMU report (what to check before trusting a VIO run)."""
+from __future__ import annotations
+
+import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import click  # noqa: E402
+
+from gevi_cli.commands.options import add_sequence_options  # noqa: E402
+
+
+@click.command("imu")
+@click.argument("sequence", type=click.Path())
+@click.option("-o", "--out", default=None, type=click.Path(file_okay=False),
+              help="Report folder (default results/imu/<sequence>/<timestamp>/).")
+@click.option("--results-root", default="results", show_default=True, type=click.Path(file_okay=False))
+@click.option("--imu-time-offset", type=float, default=None, metavar="SECONDS",
+              help="Camera-IMU time shift t_imu = t_cam + shift (default: the calibration's).")
+@click.option("--no-plots", is_flag=True, help="Skip the plots.")
+@add_sequence_options
+def command(sequence, out, results_root, imu_time_offset, no_plots, kind, groundtruth, calib, imu_calib, topics, cameras):
+    """IMU report of SEQUENCE: rate and gaps, standstill intervals, the starting gyro bias and gravity
+    direction, white noise measured at rest next to the stated densities, and roll/pitch over the
+    whole stream (IMU-only filter with an adaptive gravity prior; against ground truth when there is
+    some, next to gyro-only integration and a fixed-gain complementary filter).
+
+    Writes imu_states.csv, attitude.tum (orientation of the body in a gravity-aligned frame, zero
+    position), report.md and plots.
+
+    \b
+    Example:
+      gevi imu ../shared/data/euroc_micro --gt ../shared/data/euroc_micro/groundtruth/V1_01_easy.csv
+    """
+    from gevi_cli.inertial.report_io import run_imu_report
+
+    run_imu_report(sequence, out=out, results_root=results_root, imu_time_offset=imu_time_offset, plots=not no_plots,
+                   kind=kind, groundtruth=groundtruth, calib=calib, imu_calib=imu_calib, topics=topics,
+                   cameras=cameras, echo=click.echo)

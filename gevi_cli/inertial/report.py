@@ -1,0 +1,136 @@
+"""`gevi imu`: what a user checks before trusting a VIO run on a recording.
+
+Rate and gaps; standstill intervals; the gyro bias and gravity direction of the starting standstill;
+white-noise levels measured at standstill next to the stated densities; roll/pitch over the whole
+stream from the IMU-only filter of :mod:`gevi_cli.inertial.attitude`, against ground truth when
+there is some, next to plain gyro integration and a fixed-gain complementary filter (both levelled
+from the accelerometer at the start, with the standstill gyro bias; the complementary filter at the
+best of a few gains when ground truth exists).  Units: s, rad (printed in deg), m/s^2.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from gevi_cli import estimators as est
+from gevi_cli.inertial.attitude import AttitudeFilterConfig, GravityAttitudeFilter, complementary, gyro_only, run_filter
+from gevi_cli.inertial.imu_stream import ImuStream
+from gevi_cli.inertial.standstill import GRAVITY, StandstillEstimate, imu_at_rest, standstill_estimate
+
+#: standstill detection on the IMU alone (no images here): windows of this length (s) ...
+STILL_WINDOW_S = 0.5
+#: ... whose gyro std, |a| std and | mean |a| - g | stay below these (rad/s, m/s^2, m/s^2)
+STILL_LIMITS = (0.1, 0.5, 0.5)
+COMPLEMENTARY_GAINS = (3e-4, 1e-3, 3e-3, 1e-2)
+
+
+@dataclass
+class ImuReport:
+    n: int
+    duration_s: float
+    rate_hz: float
+    gaps: list  # (start_s, length_s) relative to the first sample, longer than the gap limit
+    standstills: list  # (start_s, end_s)
+    start: StandstillEstimate | None  # the standstill the stream starts with
+    noise_measured: dict  # gyro / acc white-noise density estimated at the longest standstill
+    noise_stated: dict
+    flags: list = field(default_factory=list)
+    attitude: object = None  # AttitudeTrack of the adaptive filter
+    comparison: list = field(default_factory=list)  # (name, (tilt RMSE, roll/pitch RMSE) deg, note) against GT
+
+
+def _standstills(stream: ImuStream) -> list[tuple[int, int]]:
+    """Index ranges [i0, i1) of merged windows that pass the IMU rest test."""
+    w = max(int(round(STILL_WINDOW_S / stream.dt_nominal)), 4)
+    out: list[list[int]] = []
+    for i0 in range(0, len(stream.t_ns) - w + 1, w):
+        if imu_at_rest(stream.gyro[i0:i0 + w], stream.acc[i0:i0 + w], *STILL_LIMITS):
+            if out and out[-1][1] == i0:
+                out[-1][1] = i0 + w
+            else:
+                out.append([i0, i0 + w])
+    return [(a, b) for a, b in out]
+
+
+def imu_report(stream: ImuStream, gt=None, cfg: AttitudeFilterConfig = AttitudeFilterConfig()) -> ImuReport:
+    """The whole report for ``stream``; ``gt`` an optional gravity-aligned body Trajectory."""
+    t, g, a = stream.t_ns, stream.gyro, stream.acc
+    t0 = int(t[0])
+    dt = np.diff(t)
+    gaps = [((int(t[i]) - t0) * 1e-9, dt[i] * 1e-9) for i in np.flatnonzero(dt > stream.max_gap_ns)]
+    still = _standstills(stream)
+    standstills = [((int(t[i0]) - t0) * 1e-9, (int(t[i1 - 1]) - t0) * 1e-9) for i0, i1 in still]
+    start = None
+    if still and still[0][0] == 0:
+        i1 = still[0][1]
+        start = standstill_estimate(t[:i1], g[:i1], a[:i1])
+    measured = {}
+    if still:
+        i0, i1 = max(still, key=lambda r: r[1] - r[0])
+        # per-sample std x sqrt(dt) = the continuous-time density if the rest were pure white noise
+        measured = {"gyro_noise_density": float(np.mean(g[i0:i1].std(0)) * np.sqrt(stream.dt_nominal)),
+                    "acc_noise_density": float(np.mean(a[i0:i1].std(0)) * np.sqrt(stream.dt_nominal)),
+                    "over_s": (int(t[i1 - 1]) - int(t[i0])) * 1e-9}
+    stated = {"gyro_noise_density": stream.noise.gyro_noise_density, "acc_noise_density": stream.noise.acc_noise_density}
+    flags = _flags(stream, start)
+    rep = ImuReport(len(t), (int(t[-1]) - t0) * 1e-9, stream.rate_hz, gaps, standstills, start, measured, stated, flags)
+
+    # the attitude: levelled from the starting standstill (or the first 0.5 s of specific force)
+    if start is not None:
+        roll, pitch, b_g = start.roll, start.pitch, start.b_g
+    else:
+        from gevi_cli.inertial.standstill import tilt_from_specific_force
+
+        k = max(int(round(0.5 / stream.dt_nominal)), 1)
+        roll, pitch = tilt_from_specific_force(a[:k].mean(0))
+        b_g = np.zeros(3)
+    R0 = est.rtilt(roll, pitch)
+    filt = GravityAttitudeFilter(R0, b_g, stream.noise, stream.dt_nominal, cfg)
+    rep.attitude = run_filter(filt, t, g, a)
+    if gt is not None:
+        rep.comparison = _compare(rep, stream, gt, R0, b_g, cfg)
+    return rep
+
+
+def _flags(stream: ImuStream, start: StandstillEstimate | None) -> list[str]:
+    out = []
+    if start is not None and abs(start.acc_norm - GRAVITY) > 0.3:
+        out.append(f"mean |specific force| at rest is {start.acc_norm:.3f} m/s^2, not 9.81: accelerometer units or "
+                   "scale wrong (g instead of m/s^2?)")
+    peak = float(np.abs(stream.gyro).max())
+    if (start is not None and np.linalg.norm(start.b_g) > 0.5) or peak > 35.0:
+        out.append(f"gyro looks like deg/s, not rad/s (|rate at rest| {np.linalg.norm(start.b_g) if start else float('nan'):.3g}, "
+                   f"peak {peak:.3g})")
+    if start is None:
+        out.append("the stream does not start at rest: levelled from the first 0.5 s of specific force, gyro bias 0")
+    return out
+
+
+def _traj(t_ns, R):
+    from gevi_cli.trajectory import Trajectory
+
+    return Trajectory.from_rotations(np.asarray(t_ns, dtype=np.int64), R, np.zeros((len(t_ns), 3)), frame="body")
+
+
+def _compare(rep: ImuReport, stream: ImuStream, gt, R0, b_g, cfg) -> list:
+    from gevi_cli.evaluation.tilt import tilt_errors
+
+    t, g, a = stream.t_ns, stream.gyro, stream.acc
+
+    def rmse(t_ns, R, max_diff):
+        te = tilt_errors(_traj(t_ns, R), gt, max_diff_s=max_diff)
+        return te.rmse_deg, te.roll_pitch_rmse_deg
+
+    half = 0.51 / cfg.update_hz  # every ground-truth stamp finds a filter output
+    rows = [("adaptive gravity filter (gevi imu)", rmse(rep.attitude.t_ns, rep.attitude.R_WI, half),
+             "online gyro bias, adaptive gravity-prior covariance")]
+    fixed = GravityAttitudeFilter(R0, b_g, stream.noise, stream.dt_nominal,
+                                  AttitudeFilterConfig(**{**cfg.__dict__, "adaptive": False}))
+    trk = run_filter(fixed, t, g, a)
+    rows.append(("same filter, fixed gravity weight", rmse(trk.t_ns, trk.R_WI, half), "Sigma = noise floor"))
+    rows.append(("gyro-only integration", rmse(t, gyro_only(R0, b_g, t, g), 0.003), "standstill gyro bias"))
+    best = min(((k, rmse(t, complementary(R0, b_g, t, g, a, k), 0.003)) for k in COMPLEMENTARY_GAINS),
+               key=lambda x: x[1][0])
+    rows.append(("complementary filter, fixed gain", best[1], f"best of gains {COMPLEMENTARY_GAINS}: {best[0]:g}"))
+    return rows

@@ -1,0 +1,109 @@
+"""`gevi imu`'s I/O: open the sequence, build the report (:mod:`.report`), write and print it."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from gevi_cli.errors import GeviError
+
+
+def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind, groundtruth, calib, imu_calib, topics,
+                   cameras, echo=print) -> Path:
+    from gevi_cli.commands.options import sequence_kwargs
+    from gevi_cli.datasets import open_sequence
+    from gevi_cli.inertial.imu_stream import ImuStream
+    from gevi_cli.inertial.report import imu_report
+    from gevi_cli.run.folder import make_run_dir
+
+    path = Path(sequence)
+    if not path.exists():
+        raise GeviError(path, "no such file or folder")
+    seq = open_sequence(path, kind=kind, **sequence_kwargs(groundtruth, calib, topics, cameras, imu_calib))
+    imu = seq.imu
+    if imu is None or len(imu) < 2:
+        raise GeviError(path, "has no IMU data")
+    warn = lambda m: echo(f"gevi: warning: {m}", err=True)  # noqa: E731
+    offset = imu_time_offset if imu_time_offset is not None else float(getattr(seq, "imu_time_offset_s", 0.0) or 0.0)
+    stream = ImuStream.from_sequence(imu, offset, f"{path} (IMU)", warn)
+    gt = seq.groundtruth
+    if gt is not None and gt.frame not in ("body", "unknown"):
+        warn(f"ground truth is in the {gt.frame} frame, not the body (IMU) frame: roll/pitch not compared")
+        gt = None
+    rep = imu_report(stream, gt)
+    run_dir = make_run_dir(out, Path(results_root), "imu", seq.name)
+    _write(run_dir, stream, rep, plots)
+    for line in summary_lines(rep, stream):
+        echo(line)
+    echo(f"wrote {run_dir}")
+    return run_dir
+
+
+def summary_lines(rep, stream) -> list[str]:
+    lines = [f"IMU: {rep.n} samples, {rep.duration_s:.1f} s at {rep.rate_hz:.1f} Hz, "
+             f"{len(rep.gaps)} gap(s)" + (f" (longest {max(g[1] for g in rep.gaps):.3f} s at "
+                                          f"{max(rep.gaps, key=lambda g: g[1])[0]:.2f} s)" if rep.gaps else "")]
+    if rep.standstills:
+        shown = ", ".join(f"{a:.1f}-{b:.1f}" for a, b in rep.standstills[:6])
+        lines.append(f"standstill (IMU at rest, s): {shown}" + (" ..." if len(rep.standstills) > 6 else ""))
+    else:
+        lines.append("standstill: none found")
+    if rep.start is not None:
+        s = rep.start
+        lines.append(f"starting standstill {s.duration_s:.2f} s: gyro bias [{s.b_g[0]:+.5f} {s.b_g[1]:+.5f} "
+                     f"{s.b_g[2]:+.5f}] rad/s, roll {np.degrees(s.roll):+.3f} deg, pitch {np.degrees(s.pitch):+.3f} deg, "
+                     f"mean |a| {s.acc_norm:.4f} m/s^2")
+    if rep.noise_measured:
+        m, st = rep.noise_measured, rep.noise_stated
+        lines.append(f"white noise at rest ({m['over_s']:.1f} s): gyro {m['gyro_noise_density']:.3g} rad/s/sqrt(Hz) "
+                     f"(stated {st['gyro_noise_density']:.3g}, x{m['gyro_noise_density'] / st['gyro_noise_density']:.1f}), "
+                     f"acc {m['acc_noise_density']:.3g} m/s^2/sqrt(Hz) (stated {st['acc_noise_density']:.3g}, "
+                     f"x{m['acc_noise_density'] / st['acc_noise_density']:.1f}); above the stated noise = vibration")
+    for f in rep.flags:
+        lines.append(f"flag: {f}")
+    if rep.comparison:
+        lines.append("")
+        lines.append("| roll/pitch against ground truth | tilt RMSE [deg] | roll, pitch RMSE [deg] | note |")
+        lines.append("|---|---|---|---|")
+        lines += [f"| {n} | {v[0]:.3f} | {v[1]:.3f} | {note} |" for n, v, note in rep.comparison]
+        lines.append("(tilt = angle between estimated and true gravity direction in the body frame; roll, pitch = RMS "
+                     "of both Euler-angle differences, amplified near pitch +-90 deg; no alignment)")
+    return lines
+
+
+def _write(run_dir: Path, stream, rep, plots: bool) -> None:
+    from gevi_cli import estimators as est
+    from gevi_cli.trajectory import Trajectory, write_trajectory
+
+    att = rep.attitude
+    roll, pitch = est.tilt_angles(att.R_WI)
+    yaw = np.arctan2(att.R_WI[:, 1, 0], att.R_WI[:, 0, 0])
+    tr = np.trace(att.Sigma, axis1=1, axis2=2)
+    with open(run_dir / "imu_states.csv", "w") as f:
+        f.write("t_ns,roll,pitch,yaw,bgx,bgy,bgz,sigma_trace\n")  # rad, rad/s, dimensionless
+        for k in range(len(att.t_ns)):
+            f.write(f"{att.t_ns[k]},{roll[k]:.9g},{pitch[k]:.9g},{yaw[k]:.9g},{att.b_g[k, 0]:.9g},{att.b_g[k, 1]:.9g},"
+                    f"{att.b_g[k, 2]:.9g},{tr[k]:.9g}\n")
+    write_trajectory(Trajectory.from_rotations(att.t_ns, att.R_WI, np.zeros((len(att.t_ns), 3)), frame="body"),
+                     run_dir / "attitude.tum", "tum")
+    (run_dir / "report.md").write_text("# gevi imu\n\n" + "\n".join(summary_lines(rep, stream)) + "\n")
+    if plots:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        t = (att.t_ns - att.t_ns[0]) * 1e-9
+        fig, ax = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+        ax[0].plot(t, np.degrees(roll), label="roll")
+        ax[0].plot(t, np.degrees(pitch), label="pitch")
+        ax[0].set_ylabel("deg")
+        ax[0].legend()
+        ax[1].plot(t, att.b_g)
+        ax[1].set_ylabel("gyro bias [rad/s]")
+        ax[2].semilogy(t, np.sqrt(tr))
+        ax[2].set_ylabel("sqrt tr Sigma_imu")
+        ax[2].set_xlabel("time [s]")
+        fig.tight_layout()
+        fig.savefig(run_dir / "imu.png", dpi=100)
+        plt.close(fig)
