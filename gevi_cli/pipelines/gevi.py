@@ -108,6 +108,7 @@ class GeviOdometry(KeyframeOdometry):
         self.t_prev: int | None = None
         self.t_first: int | None = None
         self.first_kf_index: int | None = None
+        self.T_first: np.ndarray | None = None  # pose of the first frame (in W once initialised)
         self.still = True  # the standstill that started the run is still going on
         self.init_poses: list[tuple[int, int, np.ndarray]] = []  # (index, t_ns, T_w_c) in V, tracked ones
         self.next_init_try: int | None = None
@@ -386,11 +387,7 @@ class GeviOdometry(KeyframeOdometry):
         elapsed = (t_ns - self.t_first) * 1e-9
         if self.still:
             ts, g, a = self.imu.window(self.t_first, t_ns)
-            # no keyframe yet (textureless start): the images say nothing and the IMU decides
-            flow_ok = res.index == 0 or self.first_kf_index is None or (
-                res.status == OK and self.kf is not None and self.kf.index == self.first_kf_index
-                and self.last_flow_px <= ic.still_max_flow_px)
-            rest = flow_ok and (len(ts) < 2 or imu_at_rest(g, a, ic.still_max_gyro_std, ic.still_max_acc_std,
+            rest = self._images_at_rest(res) and (len(ts) < 2 or imu_at_rest(g, a, ic.still_max_gyro_std, ic.still_max_acc_std,
                                                            ic.still_max_gravity_err))
             if not rest:
                 self.still = False
@@ -414,7 +411,8 @@ class GeviOdometry(KeyframeOdometry):
     def _initialise_moving(self, res, elapsed: float) -> None:
         ic = self.cfg.init
         poses = self.init_poses[::max(ic.stride, 1)]
-        opts = est.InitOptions(ba_prior_sigma=ic.ba_prior_sigma, acc_noise_density=self.imu.noise.acc_noise_density)
+        opts = est.InitOptions(ba_prior_sigma=ic.ba_prior_sigma, acc_noise_density=self.imu.noise.acc_noise_density,
+                               pose_pos_sigma=ic.pose_sigma_m)
         try:
             r = est.stereo_imu_init(np.array([p[1] for p in poses], dtype=np.int64),
                                     np.array([p[2][:3, :3] for p in poses]), np.array([p[2][:3, 3] for p in poses]),
@@ -448,6 +446,7 @@ class GeviOdometry(KeyframeOdometry):
         if self.T_w_last is not None:
             self.T_w_last = T_WV @ self.T_w_last
         poses = dict(self.pending)
+        self.T_first = self.pending[0][1].copy() if self.pending else res.T_w_c.copy()
         self.tilt = _tilt_of(res.T_w_c[:3, :3], self.R_ic)
         s0 = (self.cfg.init.ba_prior_sigma / GRAVITY) ** 2  # the bias/tilt ambiguity floor (spec 9.6)
         self.tilt_cov = np.eye(2) * s0
@@ -483,13 +482,28 @@ class GeviOdometry(KeyframeOdometry):
                                   b_a=self.b_a)
         self.attitude = run_filter(f, ts, g, a)
 
+    def _images_at_rest(self, res) -> bool:
+        """The camera has not moved since the first frame by more than ``init.still_max_flow_px`` of image
+        motion: f (rotation angle + translation / median keyframe depth), from the tracked pose (so it holds
+        across keyframes).  Before any keyframe (a textureless start) the images say nothing: True."""
+        if self.first_kf_index is None or res.index == 0:
+            return True
+        if res.status != OK or self.kf is None or len(self.kf) == 0:
+            return False
+        T0 = self.pending[0][1] if self.phase == INIT and self.pending else self.T_first
+        if T0 is None:
+            return False
+        D = np.linalg.inv(T0) @ res.T_w_c
+        angle = float(np.linalg.norm(est.log_so3(D[:3, :3])))
+        depth = float(np.median(self.kf.p[:, 2]))
+        motion_px = self.camera.f * (angle + np.linalg.norm(D[:3, 3]) / max(depth, 1e-3))
+        return motion_px <= self.cfg.init.still_max_flow_px
+
     def _update_standstill(self, res) -> None:
         """While the starting standstill lasts, the gyro bias is the mean rate over all of it."""
         ic = self.cfg.init
         ts, g, a = self.imu.window(self.t_first, res.t_ns)
-        flow_ok = self.first_kf_index is None or (res.status == OK and self.kf is not None and self.kf.index ==
-                                                  self.first_kf_index and self.last_flow_px <= ic.still_max_flow_px)
-        if flow_ok and imu_at_rest(g, a, ic.still_max_gyro_std, ic.still_max_acc_std, ic.still_max_gravity_err):
+        if self._images_at_rest(res) and imu_at_rest(g, a, ic.still_max_gyro_std, ic.still_max_acc_std, ic.still_max_gravity_err):
             self.b_g = g.mean(0)
             self.init_info["standstill_s"] = (ts[-1] - ts[0]) * 1e-9
         else:

@@ -101,7 +101,6 @@ class KeyframeOdometry:
         self._last = None  # (p, q) of the last tracked frame's verified matches
         self.ba_rejected = 0
         self.fallbacks = 0  # frames whose 6-DOF pose step started from SQPnP instead of Bias-Eli
-        self.last_flow_px = 0.0  # median keyframe -> current displacement of the verified matches (px)
 
     # ------------------------------------------------------------------ to be provided by pipelines
     def estimate_T_ck(self, m: Matches, frame) -> np.ndarray:  # pragma: no cover - abstract
@@ -211,9 +210,7 @@ class KeyframeOdometry:
         timings["noise"] = t2 - t1
         T_ck = self.estimate_T_ck(m, frame)
         timings["pose"] = time.perf_counter() - t2
-        disp = np.linalg.norm(m.q - m.z, axis=1) * self.camera.f
-        disp_px = float(np.mean(disp))
-        self.last_flow_px = float(np.median(disp))
+        disp_px = float(np.mean(np.linalg.norm(m.q - m.z, axis=1))) * self.camera.f
         self._last = (m.p, m.q)
         return T_ck, n_match, len(m.ids), disp_px
 
