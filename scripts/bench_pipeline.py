@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
-"""Speed of `gevi run` (CurrentFeature Odometry) next to the front-end floor measured in the same run.
+"""Speed of `gevi run` (CurrentFeature Odometry and GeVI) next to the front-end floor measured in the same run.
 
-    python scripts/bench_pipeline.py [--data ../shared/data] [--kitti-like PATH] [--repeat 3]
+    python scripts/bench_pipeline.py [--data ../shared/data] [--kitti-like PATH] [--pool PATH] [--repeat 3]
 
 Per sequence, on the same frames and in the same process:
 
@@ -13,8 +13,9 @@ Per sequence, on the same frames and in the same process:
   writing, evaluation) on euroc_micro, against ``3.3 x (95 x floor per frame)``, where ORB-SLAM3
   stereo's whole process (4.7-5.6 s) stood beside a 14-17 ms floor on this kind of machine.
 
-Targets (the issue): pipeline <= 2 x floor per frame; process <= 3.3 x 95 x floor.
-Without ``--kitti-like`` a 5 s kitti-like render is made with ``gevi simulate`` in a temporary folder.
+Targets: CFO pipeline <= 2 x floor per frame; process <= 3.3 x 95 x floor; GeVI per frame <= 1.3 x CFO
+on the same stereo-IMU sequence (euroc_micro and a pool-easy render; kitti-like has no IMU).
+Without ``--kitti-like`` / ``--pool`` 5 s / 10 s renders are made with ``gevi simulate`` in a temporary folder.
 The repeats interleave floor and pipeline so load changes on a shared machine hit both.
 """
 from __future__ import annotations
@@ -64,14 +65,15 @@ def floor_ms(seq) -> float:
     return 1e3 * float(np.mean(times[1:]))
 
 
-def pipeline_run(seq_path: Path, extra: list[str], out: Path) -> tuple[float, dict]:
+def pipeline_run(seq_path: Path, extra: list[str], out: Path, method: str = "cfo") -> tuple[float, dict]:
     """(mean ms per frame of the driver loop, reading included; mean ms per stage) of an in-process run."""
     from gevi_cli.run.session import RunRequest, execute
 
     if out.exists():
         shutil.rmtree(out)
     gt = extra[extra.index("--gt") + 1] if "--gt" in extra else None
-    execute(RunRequest(sequence=str(seq_path), out=str(out), quiet=True, groundtruth=gt), echo=lambda *a, **k: None)
+    execute(RunRequest(sequence=str(seq_path), method=method, out=str(out), quiet=True, groundtruth=gt),
+            echo=lambda *a, **k: None)
     import pandas as pd
 
     t = pd.read_csv(out / "timing.csv")
@@ -83,6 +85,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=DATA)
     ap.add_argument("--kitti-like", type=Path, default=None, help="a kitti-like render (default: render 5 s)")
+    ap.add_argument("--pool", type=Path, default=None, help="a pool-easy render (default: render 10 s)")
     ap.add_argument("--repeat", type=int, default=3)
     a = ap.parse_args()
     from gevi_cli.datasets import open_sequence
@@ -100,16 +103,27 @@ def main():
         subprocess.run(gevi_cmd() + ["simulate", "kitti-like", str(kl), "--format", "kitti", "--duration", "5",
                                      "--seed", "1", "-q"], check=True)
     seqs["kitti-like"] = (kl, [])
-    rows = []
+    pool = a.pool
+    if pool is None:
+        pool = tmp / "pool-easy"
+        print("rendering a 10 s pool-easy sequence ...", flush=True)
+        subprocess.run(gevi_cmd() + ["simulate", "pool-easy", str(pool), "--duration", "10", "--seed", "1", "-q"],
+                       check=True)
+    seqs["pool-easy"] = (pool, [])
+    rows, gevi_rows = [], []
     for name, (path, extra) in seqs.items():
         seq = open_sequence(path)
-        floors, pipes, stages = [], [], None
+        methods = ["cfo", "gevi"] if seq.imu is not None else ["cfo"]
+        floors, pipes, stages = [], {m: [] for m in methods}, {}
         for _ in range(a.repeat):
             floors.append(floor_ms(seq))
-            ms, stages = pipeline_run(path, extra, tmp / f"run-{name}")
-            pipes.append(ms)
-        f, p = float(np.median(floors)), float(np.median(pipes))
-        rows.append((name, len(seq), f, p, stages))
+            for m in methods:
+                ms, stages[m] = pipeline_run(path, extra, tmp / f"run-{name}-{m}", m)
+                pipes[m].append(ms)
+        f, p = float(np.median(floors)), float(np.median(pipes["cfo"]))
+        rows.append((name, len(seq), f, p, stages["cfo"]))
+        if "gevi" in methods:
+            gevi_rows.append((name, len(seq), f, p, float(np.median(pipes["gevi"])), stages["gevi"]))
     print(f"\nload average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs; medians of {a.repeat} interleaved repeats\n")
     print("| sequence | frames | floor ms/frame | pipeline ms/frame | ratio | target | frames/s |")
     print("|---|---|---|---|---|---|---|")
@@ -121,13 +135,26 @@ def main():
     print("|---|" + "---|" * len(keys))
     for name, _, _, _, st in rows:
         print(f"| {name} | " + " | ".join(f"{st.get(k, 0.0):.2f}" for k in keys) + " |")
+    if gevi_rows:
+        print("\nGeVI against CFO on the same frames (ms per frame, medians):")
+        print("| sequence | frames | floor | cfo | gevi | gevi / cfo | target |")
+        print("|---|---|---|---|---|---|---|")
+        for name, n, f, c, g, _ in gevi_rows:
+            print(f"| {name} | {n} | {f:.2f} | {c:.2f} | {g:.2f} | {g / c:.2f} | <= 1.3 |")
+        keys = [k for k in gevi_rows[0][5] if k != "total"]
+        print("\nGeVI mean ms per stage (one run):")
+        print("| sequence | " + " | ".join(keys) + " |")
+        print("|---|" + "---|" * len(keys))
+        for name, *_, st in gevi_rows:
+            print(f"| {name} | " + " | ".join(f"{st.get(k, 0.0):.2f}" for k in keys) + " |")
     if "euroc_micro" in seqs:
         walls = []
         for _ in range(a.repeat):
             out = tmp / "proc"
             shutil.rmtree(out, ignore_errors=True)
             t0 = time.perf_counter()
-            subprocess.run(gevi_cmd() + ["run", str(euroc), "--gt", str(gt), "-q", "-o", str(out)], check=False,
+            subprocess.run(gevi_cmd() + ["run", str(euroc), "--method", "cfo", "--gt", str(gt), "-q", "-o", str(out)],
+                           check=False,
                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
             walls.append(time.perf_counter() - t0)
         f = next(r[2] for r in rows if r[0] == "euroc_micro")

@@ -142,3 +142,26 @@ def plot_summary(out_dir: Path, table) -> list[Path]:
     ax.grid(True, axis="y", alpha=0.3)
     ax.legend(fontsize=8)
     return _save(fig, out_dir / "summary_ate")
+
+
+def plot_imu_states(csv_path: Path, png_path: Path) -> Path:
+    """Roll/pitch/yaw (deg), gyro bias and sqrt(tr Sigma_imu) over time from an ``imu_states.csv``
+    (written by `gevi run --method gevi` and `gevi imu`; angles rad, bias rad/s)."""
+    import pandas as pd
+
+    s = pd.read_csv(csv_path)
+    t = (s.t_ns.to_numpy(np.int64) - int(s.t_ns.iloc[0])) * 1e-9
+    fig, ax = _figure(9.0, 7.0, nrows=3)
+    for k in ("roll", "pitch", "yaw"):
+        ax[0].plot(t, np.degrees(np.unwrap(s[k].to_numpy(float))), label=k, lw=0.9)
+    ax[0].set_ylabel("deg")
+    ax[0].legend(loc="upper right")
+    for k in ("bgx", "bgy", "bgz"):
+        ax[1].plot(t, s[k], label=k, lw=0.9)
+    ax[1].set_ylabel("gyro bias [rad/s]")
+    ax[1].legend(loc="upper right")
+    ax[2].semilogy(t, np.degrees(np.sqrt(s.sigma_trace.to_numpy(float))), lw=0.9)
+    ax[2].set_ylabel("sqrt tr Sigma_imu [deg]")
+    ax[2].set_xlabel("time [s]")
+    fig.savefig(png_path, dpi=100)
+    return Path(png_path)

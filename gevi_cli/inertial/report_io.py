@@ -88,22 +88,6 @@ def _write(run_dir: Path, stream, rep, plots: bool) -> None:
                      run_dir / "attitude.tum", "tum")
     (run_dir / "report.md").write_text("# gevi imu\n\n" + "\n".join(summary_lines(rep, stream)) + "\n")
     if plots:
-        import matplotlib
+        from gevi_cli.evaluation.plots import plot_imu_states
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        t = (att.t_ns - att.t_ns[0]) * 1e-9
-        fig, ax = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
-        ax[0].plot(t, np.degrees(roll), label="roll")
-        ax[0].plot(t, np.degrees(pitch), label="pitch")
-        ax[0].set_ylabel("deg")
-        ax[0].legend()
-        ax[1].plot(t, att.b_g)
-        ax[1].set_ylabel("gyro bias [rad/s]")
-        ax[2].semilogy(t, np.sqrt(tr))
-        ax[2].set_ylabel("sqrt tr Sigma_imu")
-        ax[2].set_xlabel("time [s]")
-        fig.tight_layout()
-        fig.savefig(run_dir / "imu.png", dpi=100)
-        plt.close(fig)
+        plot_imu_states(run_dir / "imu_states.csv", run_dir / "imu_states.png")

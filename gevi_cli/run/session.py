@@ -263,8 +263,16 @@ def execute(req: RunRequest, echo=print) -> int:
     for iv in st.lost_intervals[:5]:
         echo(f"tracking lost at {iv['start_s'] - t0_s:.3f} s (frame {iv['first_index']}, {iv['frames']} frame(s) bridged): "
              f"{iv['reason']}")
+    if st.inertial_frames:
+        first = st.inertial_frames[0]
+        echo(f"vision could not track {len(st.inertial_frames)} frame(s) (first: frame {first}); they were carried by "
+             "the IMU alone (status.json inertial_frames, frames.csv)")
     if len(st.lost_intervals) > 5:
         echo(f"... and {len(st.lost_intervals) - 5} more loss(es); see status.json and frames.csv")
+    if method == "gevi" and (run_dir / "imu_states.csv").is_file():
+        from gevi_cli.evaluation.plots import plot_imu_states
+
+        plot_imu_states(run_dir / "imu_states.csv", run_dir / "imu_states.png")
     gt = _gt_source(req, source)
     if gt is not None:
         _evaluate(run_dir, req, cfg, gt, seq_name, st, echo)

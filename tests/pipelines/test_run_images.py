@@ -114,7 +114,7 @@ def test_black_frames_are_a_reported_loss(render, tmp_path, capsys):
             shape = cv2.imread(str(img), cv2.IMREAD_GRAYSCALE).shape
             cv2.imwrite(str(img), np.zeros(shape, np.uint8))
     out = tmp_path / "out"
-    code, stdout, err = run_cli(["run", d, "-o", out, "-q"], capsys)
+    code, stdout, err = run_cli(["run", d, "--method", "cfo", "-o", out, "-q"], capsys)
     assert code == 3 and "tracking lost" in stdout and "lost-tracking" in err
     st = _status(out)
     assert st["state"] == "lost-tracking" and st["lost_intervals"]
@@ -142,3 +142,21 @@ def test_bad_sequences_are_one_line(render, tmp_path, capsys, damage, expect):
     code, _, err = run_cli(args, capsys)
     assert code == 2 and err.count("\n") == 1 and err.startswith("gevi: error: "), err
     assert expect in err
+
+
+def test_black_frames_are_carried_by_the_imu_in_gevi(render, tmp_path, capsys):
+    """GeVI keeps a pose for frames vision cannot track (IMU preintegration), says so, and tracks on."""
+    import cv2
+
+    d = _copy(render, tmp_path)
+    for cam in ("cam0", "cam1"):
+        for img in sorted((d / f"mav0/{cam}/data").glob("*.png"))[15:20]:
+            shape = cv2.imread(str(img), cv2.IMREAD_GRAYSCALE).shape
+            cv2.imwrite(str(img), np.zeros(shape, np.uint8))
+    out = tmp_path / "out"
+    code, stdout, err = run_cli(["run", d, "--method", "gevi", "-o", out, "-q"], capsys)
+    assert code == 0, err
+    st = _status(out)
+    assert set(range(15, 20)) <= set(st["inertial_frames"]) and st["frames_tracked"] == 40
+    assert "carried by the IMU alone" in stdout
+    assert st["evaluation"]["ate_m"] < 0.05
