@@ -1,0 +1,94 @@
+"""Verification speed: GeVI's upright 3-point RANSAC against OpenCV's 5-point RANSAC on the same matches.
+
+    python scripts/bench_verify.py SEQUENCE [--frames 300] [--repeat 5]
+
+Runs `gevi run --method gevi` in-process on the first frames of SEQUENCE (a stereo-IMU sequence),
+records the inputs of every 3-point verification (keyframe-left / current-left normalized matches,
+levelling rotations, threshold), then times both RANSACs on exactly those inputs, interleaved, with
+the pipeline's confidence and threshold (5-point: the same Sampson threshold, OpenCV's
+``findEssentialMat``).  Prints the median time per frame, the iterations and the inlier agreement.  ``--outliers 0.3``
+replaces 30 % of the current points by random ones (S1's outlier study) on the same inputs.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def record(seq: Path, frames: int):
+    from gevi_cli import estimators as est
+    from gevi_cli.run.session import RunRequest, execute
+
+    calls = []
+    real = est.ransac_3pt_upright
+
+    def spy(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, **kw):
+        calls.append((z.copy(), q.copy(), L_k.copy(), L_c.copy(), float(threshold), int(seed), float(confidence)))
+        return real(z, q, L_k, L_c, threshold, seed=seed, confidence=confidence, **kw)
+
+    est.ransac_3pt_upright = spy
+    try:
+        with tempfile.TemporaryDirectory() as d:
+            execute(RunRequest(sequence=str(seq), method="gevi", max_frames=frames, out=d, quiet=True),
+                    echo=lambda *a, **k: None)
+    finally:
+        est.ransac_3pt_upright = real
+    return calls
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("sequence", type=Path)
+    ap.add_argument("--frames", type=int, default=300)
+    ap.add_argument("--repeat", type=int, default=5)
+    ap.add_argument("--outliers", type=float, default=0.0,
+                    help="also replace this fraction of the current points by uniform random image points (S1's study)")
+    a = ap.parse_args()
+    from gevi_cli import estimators as est
+
+    cv2.setNumThreads(1)
+    calls = record(a.sequence, a.frames)
+    t3, t5, it3, agree = [], [], [], []
+    rng = np.random.default_rng(0)
+    for z, q, L_k, L_c, thr, seed, conf in calls:
+        if a.outliers > 0:
+            q = q.copy()
+            k = rng.random(len(q)) < a.outliers
+            lo, hi = q.min(0), q.max(0)
+            q[k] = rng.uniform(lo, hi, (int(k.sum()), 2))
+        r3, r5 = [], []
+        for _ in range(a.repeat):
+            t0 = time.perf_counter()
+            _, _, in3, it = est.ransac_3pt_upright(z, q, L_k, L_c, thr, seed=seed, confidence=conf)
+            r3.append(time.perf_counter() - t0)
+            cv2.setRNGSeed(seed)
+            t0 = time.perf_counter()
+            _, mask = cv2.findEssentialMat(z.reshape(-1, 1, 2), q.reshape(-1, 1, 2), np.eye(3), method=cv2.RANSAC,
+                                           prob=conf, threshold=thr)
+            r5.append(time.perf_counter() - t0)
+        t3.append(np.median(r3))
+        t5.append(np.median(r5))
+        it3.append(it)
+        if mask is not None:
+            agree.append(np.mean(in3 == mask.ravel().astype(bool)))
+    n = [len(c[0]) for c in calls]
+    print(f"{len(calls)} verifications on {a.sequence.name} (matches per frame: median {int(np.median(n))}; "
+          f"added outliers {100 * a.outliers:.0f} %)")
+    print("| RANSAC | median ms / frame | mean ms / frame |")
+    print("|---|---|---|")
+    print(f"| 3-point upright (gevi) | {1e3 * np.median(t3):.3f} | {1e3 * np.mean(t3):.3f} |")
+    print(f"| 5-point OpenCV | {1e3 * np.median(t5):.3f} | {1e3 * np.mean(t5):.3f} |")
+    print(f"3-point minimal samples drawn: median {int(np.median(it3))}; inlier-mask agreement with 5-point "
+          f"{100 * np.mean(agree):.1f} %")
+
+
+if __name__ == "__main__":
+    main()
