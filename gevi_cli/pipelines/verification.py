@@ -3,7 +3,8 @@
 CurrentFeature Odometry (spec 12.1, 5.5): (1) 5-point essential-matrix RANSAC (OpenCV) between
 keyframe-left and current-left, then (2) the l1-norm PnP on the survivors and the drop of the
 ``l1_drop`` fraction with the largest reprojection errors.  GeVI replaces stage (1) with its 3-point
-RANSAC with known roll/pitch and keeps (2); both expose ``__call__(z, q, p, seed) -> keep-mask``.
+RANSAC with known roll/pitch (and its defaults turn (2) off, spec 2); both expose
+``__call__(z, q, p, seed) -> keep-mask``.
 """
 from __future__ import annotations
 
@@ -29,7 +30,23 @@ def l1_stage(p: np.ndarray, q: np.ndarray, cfg: VerifyConfig) -> np.ndarray:
         raise TrackingFailure(f"l1-PnP: {err}") from None
 
 
-class FivePointL1Verification:
+class TwoStageVerification:
+    """Stage (1), a RANSAC the subclass provides (``ransac(z, q, seed) -> mask``), then stage (2), the l1 drop."""
+
+    label = "RANSAC"
+
+    def __call__(self, z: np.ndarray, q: np.ndarray, p: np.ndarray, seed: int) -> np.ndarray:
+        keep = self.ransac(z, q, seed)
+        idx = np.flatnonzero(keep)
+        if len(idx) < 6:
+            raise TrackingFailure(f"only {len(idx)} matches survive {self.label}")
+        sub = l1_stage(p[idx], q[idx], self.cfg)
+        out = np.zeros(len(z), dtype=bool)
+        out[idx[sub]] = True
+        return out
+
+
+class FivePointL1Verification(TwoStageVerification):
     """CFO's two-stage verification (5-point RANSAC, then l1-PnP drop)."""
 
     def __init__(self, cfg: VerifyConfig, camera: RectifiedStereo):
@@ -52,18 +69,9 @@ class FivePointL1Verification:
             raise TrackingFailure("5-point RANSAC found no essential matrix")
         return mask.ravel().astype(bool)
 
-    def __call__(self, z: np.ndarray, q: np.ndarray, p: np.ndarray, seed: int) -> np.ndarray:
-        keep = self.ransac(z, q, seed)
-        idx = np.flatnonzero(keep)
-        if len(idx) < 6:
-            raise TrackingFailure(f"only {len(idx)} matches survive RANSAC")
-        sub = l1_stage(p[idx], q[idx], self.cfg)
-        out = np.zeros(len(z), dtype=bool)
-        out[idx[sub]] = True
-        return out
 
 
-class ThreePointVerification:
+class ThreePointVerification(TwoStageVerification):
     """GeVI's verification (spec 7): upright 3-point RANSAC on keyframe-left / current-left with the
     IMU roll/pitch of both frames, Sampson threshold max(``threshold_sigmas`` sigma, the px threshold);
     then the optional l1 stage as in CFO (off in GeVI's defaults).
@@ -71,6 +79,8 @@ class ThreePointVerification:
     ``levelling()`` returns ``(L_k, L_c, sigma)``: the levelling rotations of keyframe and current
     camera (camera -> yaw-free level frame) and the current normalized noise std.
     """
+
+    label = "3-point RANSAC"
 
     def __init__(self, cfg: VerifyConfig, camera: RectifiedStereo, levelling):
         self.cfg = cfg
@@ -95,12 +105,3 @@ class ThreePointVerification:
         self.iterations = int(it)
         return inliers
 
-    def __call__(self, z: np.ndarray, q: np.ndarray, p: np.ndarray, seed: int) -> np.ndarray:
-        keep = self.ransac(z, q, seed)
-        idx = np.flatnonzero(keep)
-        if len(idx) < 6:
-            raise TrackingFailure(f"only {len(idx)} matches survive 3-point RANSAC")
-        sub = l1_stage(p[idx], q[idx], self.cfg)
-        out = np.zeros(len(z), dtype=bool)
-        out[idx[sub]] = True
-        return out

@@ -105,14 +105,19 @@ def test_unreadable_image_in_the_middle_is_skipped(render, tmp_path, capsys):
     assert [s["index"] for s in st["skipped_frames"]] == [20] and st["frames_tracked"] == 39
 
 
-def test_black_frames_are_a_reported_loss(render, tmp_path, capsys):
+def _blacken(d, i0, i1):
+    """Frames i0..i1-1 of both cameras all black: nothing to track."""
     import cv2
 
-    d = _copy(render, tmp_path)
     for cam in ("cam0", "cam1"):
-        for img in sorted((d / f"mav0/{cam}/data").glob("*.png"))[15:20]:
+        for img in sorted((d / f"mav0/{cam}/data").glob("*.png"))[i0:i1]:
             shape = cv2.imread(str(img), cv2.IMREAD_GRAYSCALE).shape
             cv2.imwrite(str(img), np.zeros(shape, np.uint8))
+    return d
+
+
+def test_black_frames_are_a_reported_loss(render, tmp_path, capsys):
+    d = _blacken(_copy(render, tmp_path), 15, 20)
     out = tmp_path / "out"
     code, stdout, err = run_cli(["run", d, "--method", "cfo", "-o", out, "-q"], capsys)
     assert code == 3 and "tracking lost" in stdout and "lost-tracking" in err
@@ -146,13 +151,7 @@ def test_bad_sequences_are_one_line(render, tmp_path, capsys, damage, expect):
 
 def test_black_frames_are_carried_by_the_imu_in_gevi(render, tmp_path, capsys):
     """GeVI keeps a pose for frames vision cannot track (IMU preintegration), says so, and tracks on."""
-    import cv2
-
-    d = _copy(render, tmp_path)
-    for cam in ("cam0", "cam1"):
-        for img in sorted((d / f"mav0/{cam}/data").glob("*.png"))[15:20]:
-            shape = cv2.imread(str(img), cv2.IMREAD_GRAYSCALE).shape
-            cv2.imwrite(str(img), np.zeros(shape, np.uint8))
+    d = _blacken(_copy(render, tmp_path), 15, 20)
     out = tmp_path / "out"
     code, stdout, err = run_cli(["run", d, "--method", "gevi", "-o", out, "-q"], capsys)
     assert code == 0, err
