@@ -92,7 +92,7 @@ class FusionWindow:
     IMU: ``acc_dir`` (K, 3) bias-corrected *unit* accelerometer directions at the K samples
     (k = 0 keyframe, k = K-1 current frame), ``gyro_inc`` (K-1, 3) bias-corrected gyro rotation
     increments (omega_k - b_g) dt [rad] between samples k and k+1, ``gyro_var`` the variance of one
-    gyro-chain residual (sigma_g^2 dt with sigma_g the white-noise density, rad^2).
+    gyro-chain residual (a number, or one per link: (K-1,)) (sigma_g^2 dt with sigma_g the white-noise density, rad^2).
     Prior: keyframe roll/pitch ``prior_mean`` (2,) and ``prior_cov`` (2, 2) (rad, rad^2), e.g. the
     previous window's last tilt and :attr:`FusionState.cov_last_tilt`.
     ``lo``/``hi``: eigenvalue bounds of Sigma_imu [PROPOSAL lo = (sigma_a/g)^2, hi = 0.2^2].
@@ -109,7 +109,7 @@ class FusionWindow:
     R_ic: np.ndarray
     acc_dir: np.ndarray
     gyro_inc: np.ndarray
-    gyro_var: float
+    gyro_var: float | np.ndarray
     prior_mean: np.ndarray
     prior_cov: np.ndarray
     psi0: float
@@ -201,7 +201,7 @@ class _Problem:
         self.a = w.p @ w.R_ic.T  # points in the keyframe IMU-oriented frame
         self.K = len(w.acc_dir)
         self.dR = exp_so3(w.gyro_inc)  # (K-1, 3, 3)
-        self.Wg = 1.0 / np.sqrt(w.gyro_var)
+        self.Wg = np.broadcast_to(1.0 / np.sqrt(w.gyro_var), (len(w.acc_dir) - 1,))  # per chain link
         self.Wp = _chol2_inv(w.prior_cov)
         n = len(w.p)
         self.nv, self.ng, self.nc = 2 * n, 3 * self.K, 2 * (self.K - 1)
@@ -252,7 +252,7 @@ class _Problem:
         m = np.einsum("kji,kj->ki", self.dR, g[:-1])  # dR_k^T g_k
         roll = np.arctan2(m[:, 1], m[:, 2])
         pitch = -np.arcsin(np.clip(m[:, 0], -1.0, 1.0))
-        r = np.column_stack([wrap_angle(T[1:, 0] - roll), T[1:, 1] - pitch]) * self.Wg
+        r = np.column_stack([wrap_angle(T[1:, 0] - roll), T[1:, 1] - pitch]) * self.Wg[:, None]
         if not jac:
             return r.ravel(), None
         Km = self.K - 1
@@ -264,7 +264,7 @@ class _Problem:
         dm = np.einsum("kji,kjc->kic", self.dR, np.stack([dgp[:-1], dgt[:-1]], axis=2))  # (Km, 3, 2)
         J = np.zeros((Km, 2, self.dim))
         rows = np.arange(Km)
-        Jk = -self.Wg * (dpred @ dm)  # w.r.t. tilt k
+        Jk = -self.Wg[:, None, None] * (dpred @ dm)  # w.r.t. tilt k
         for c in range(2):
             J[rows, :, 4 + 2 * rows + c] = Jk[:, :, c]
             J[rows, c, 4 + 2 * (rows + 1) + c] = self.Wg
@@ -323,9 +323,13 @@ def _check_window(w: FusionWindow) -> FusionWindow:
     lo, hi = finite_scalar(w.lo, "lo"), finite_scalar(w.hi, "hi")
     if not 0 < lo <= hi:
         raise DegenerateInput("bcd_refine needs 0 < lo <= hi")
-    gv = finite_scalar(w.gyro_var, "gyro_var")
+    gv = np.asarray(w.gyro_var, dtype=float)
+    if gv.ndim == 0:
+        gv = float(finite_scalar(gv, "gyro_var"))
+    elif gv.shape != (K - 1,) or not np.all(np.isfinite(gv)):
+        raise ShapeError(f"gyro_var must be a number or have K-1 = {K - 1} finite entries")
     s2 = finite_scalar(w.sigma2, "sigma2")
-    if gv <= 0 or s2 < 0:
+    if np.any(np.asarray(gv) <= 0) or s2 < 0:
         raise DegenerateInput("gyro_var must be > 0 and sigma2 >= 0")
     return FusionWindow(
         p=p, cov=cov, q=q, sigma2=s2, R_ic=as_matrix(w.R_ic, (3, 3), "R_ic"), acc_dir=acc, gyro_inc=gyr,

@@ -337,6 +337,22 @@ class GeviOdometry(KeyframeOdometry):
 
     def _bcd(self, m: Matches, cov, psi, t):
         samples = self.win + [self.cur]
+        links = [s.dt for s in samples[1:]]  # seconds of gyro integration per chain link
+        cap = max(self.cfg.fusion.max_window_frames, 3)
+        if len(samples) > cap:
+            # a long window (slow motion, a standstill: one keyframe for seconds) costs O(K^3) per LM
+            # step; the oldest frames after the keyframe are folded into one chain link (the gyro
+            # rotations composed, the variance summed) and their gravity residuals dropped
+            drop = samples[1:len(samples) - cap + 2]
+            first = samples[len(samples) - cap + 2]
+            R = np.eye(3)
+            for s in drop + [first]:
+                R = R @ est.exp_so3(s.rotvec)
+            merged = FrameSample(first.index, first.t_ns, samples[0].t_ns, first.acc_dir, est.log_so3(R),
+                                 sum(s.dt for s in drop) + first.dt, first.tilt)
+            tail = samples[len(samples) - cap + 3:]
+            samples = [samples[0], merged] + tail
+            links = [merged.dt] + [s.dt for s in tail]
         L_k, L_c, _ = self._levelling()
         depth = (m.p @ est.rot4(psi, L_k, L_c).T + t)[:, 2]
         front = depth > 0.5 * self.cfg.triangulation.min_depth_m
@@ -346,7 +362,6 @@ class GeviOdometry(KeyframeOdometry):
         cov = cov[front]
         acc = np.array([s.acc_dir for s in samples])
         rot = np.array([s.rotvec for s in samples[1:]])
-        dt = float(np.mean([s.dt for s in samples[1:]])) if len(samples) > 1 else self.frame_period
         noise = self.imu.noise
         fc = self.cfg.fusion
         # noise floor of Sigma_imu: the frame-mean white noise and the accelerometer-bias uncertainty (the
@@ -366,7 +381,7 @@ class GeviOdometry(KeyframeOdometry):
             E = np.array([x[1] for x in self.innovations])
             prior, dof = E.T @ E / len(E) + lo * np.eye(3), float(len(E))
         window = est.FusionWindow(p=m.p, cov=cov, q=m.q, sigma2=self.sigma2, R_ic=self.R_ic, acc_dir=acc,
-                                  gyro_inc=rot, gyro_var=noise.gyro_noise_density ** 2 * dt, prior_mean=self.kf_tilt,
+                                  gyro_inc=rot, gyro_var=noise.gyro_noise_density ** 2 * np.array(links), prior_mean=self.kf_tilt,
                                   prior_cov=self.kf_tilt_cov, psi0=psi, t0=t, lo=lo, hi=fc.sigma_hi ** 2,
                                   tilts0=tilts0, sigma_prior=prior, sigma_prior_dof=dof)
         t0 = time.perf_counter()
@@ -377,7 +392,7 @@ class GeviOdometry(KeyframeOdometry):
         self.bcd_ms = (time.perf_counter() - t0) * 1e3
         self.tilt, self.tilt_cov, self.Sigma = state.tilts[-1].copy(), state.cov_last_tilt, Sigma
         for s, tl in zip(samples[1:-1], state.tilts[1:-1]):
-            s.tilt = tl.copy()
+            s.tilt = tl.copy()  # (a merged link's sample is a copy: the folded frames keep their tilts)
         return state.R_ck(self.R_ic), state.t
 
     # ------------------------------------------------------------------------- initialisation
