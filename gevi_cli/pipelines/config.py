@@ -126,6 +126,8 @@ class InitConfig:
     window_s: float = opt(2.0, "moving start: seconds of stereo odometry used by the stereo-IMU initialisation")
     max_window_s: float = opt(6.0, "moving start: retry with a growing window up to this long (s)")
     stride: int = opt(2, "moving start: every this many frames is an initialisation pose")
+    refine_acc_bias: bool = opt(True, "standstill start: estimate the accelerometer bias from the first window_s of "
+                                      "motion after it (stereo-IMU initialisation, only b_a adopted)")
     ba_prior_sigma: float = opt(0.05, "zero-mean prior on the accelerometer bias (m/s^2, spec 9.6)")
     pose_sigma_m: float = opt(0.001, "position noise of the stereo-odometry poses in the initialisation's weights (m); "
                                      "0 trusts them exactly: measured on a 0.15 m/s^2 moving-start render, gravity off by 0.99 deg "

@@ -117,6 +117,7 @@ class GeviOdometry(KeyframeOdometry):
         self.attitude = None  # AttitudeTrack of the IMU-only filter (fusion.mode = 4dof)
         self.bcd_ms = 0.0
         self.innovations: list[tuple[int, np.ndarray]] = []  # (t_ns, a_dir - R_tilt(pred)^T e3) for Sigma's prior
+        self.bias_poses: list[tuple[int, np.ndarray]] = []  # (t_ns, T_w_c) after the standstill, for b_a
         self.v_W = np.zeros(3)  # body velocity in W (m/s): from the visual track, carried by the IMU over losses
         self.track_hist: list[tuple[int, np.ndarray]] = []  # (t_ns, body position in W) of recent OK frames
 
@@ -186,6 +187,7 @@ class GeviOdometry(KeyframeOdometry):
                 self.v_W = np.zeros(3)
             elif res.status != INERTIAL:
                 self._update_velocity(res)
+            self._refine_acc_bias(res)
         self.cur.tilt = self.tilt.copy()
         if res.keyframe or self.kf is None:
             self._new_window(res)
@@ -523,6 +525,34 @@ class GeviOdometry(KeyframeOdometry):
             self.init_info["standstill_s"] = (ts[-1] - ts[0]) * 1e-9
         else:
             self.still = False
+
+    def _refine_acc_bias(self, res) -> None:
+        """After a standstill start, the accelerometer bias (unobservable at rest) is estimated once from
+        the first ``init.window_s`` of motion: the stereo-IMU initialisation (spec 9) over those frames'
+        poses in W, of which only b_a is adopted (W, the tilts and the gyro bias of the standstill stay).
+        [PROPOSAL]; measured in docs/method.md 9b."""
+        ic = self.cfg.init
+        if not ic.refine_acc_bias or self.still or self.init_info.get("method") != "standstill" \
+                or "acc_bias_refined" in self.init_info:
+            return
+        if res.status == OK:
+            self.bias_poses.append((res.t_ns, res.T_w_c.copy()))
+        if not self.bias_poses or (self.bias_poses[-1][0] - self.bias_poses[0][0]) * 1e-9 < ic.window_s:
+            return
+        poses = self.bias_poses[::max(ic.stride, 1)]
+        opts = est.InitOptions(ba_prior_sigma=ic.ba_prior_sigma, acc_noise_density=self.imu.noise.acc_noise_density,
+                               pose_pos_sigma=ic.pose_sigma_m, b_g0=self.b_g)
+        try:
+            r = est.stereo_imu_init(np.array([p[0] for p in poses], dtype=np.int64),
+                                    np.array([p[1][:3, :3] for p in poses]), np.array([p[1][:3, 3] for p in poses]),
+                                    self.imu.t_ns, self.imu.gyro, self.imu.acc, self.R_ic, self.p_ic, opts)
+        except est.EstimatorError as err:
+            self.init_info["acc_bias_refined"] = f"failed: {err}"
+            return
+        self.b_a = r.b_a.copy()
+        self.init_info["acc_bias_refined"] = {"at_s": (res.t_ns - self.t_first) * 1e-9, "b_a": r.b_a.tolist(),
+                                              "gravity_angle_deg": float(np.degrees(np.arccos(np.clip(
+                                                  -r.gravity_V[2] / np.linalg.norm(r.gravity_V), -1, 1))))}
 
     # --------------------------------------------------------------------------------- output
     def _state_row(self, res) -> dict:
