@@ -31,52 +31,29 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from gevi_cli import estimators as est
 from gevi_cli.frontend import FrontEnd
-from gevi_cli.inertial.attitude import AttitudeFilterConfig, GravityAttitudeFilter, run_filter
 from gevi_cli.inertial.imu_stream import ImuStream
-from gevi_cli.inertial.standstill import GRAVITY, imu_at_rest, tilt_from_specific_force
+from gevi_cli.inertial.standstill import GRAVITY
 from gevi_cli.pipelines.config import OdometryConfig
+from gevi_cli.pipelines.inertial_init import (GEVI, INIT, STANDSTILL, VISUAL, FrameSample, InertialInitialisation,
+                                              tilt_of, yaw_of)
 from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches, _make_T
 from gevi_cli.pipelines.pose6 import opencv_pnp, reprojection_median_px, tracked_pose6
 from gevi_cli.pipelines.types import INERTIAL, OK
 from gevi_cli.pipelines.verification import FivePointL1Verification, ThreePointVerification, TrackingFailure
 
-INIT, STANDSTILL, GEVI, VISUAL = "init", "standstill", "gevi", "visual"
 
 #: imu_states.csv columns (angles rad, biases rad/s and m/s^2, Sigma dimensionless unit-vector variance)
 STATE_COLUMNS = ("index", "t_ns", "phase", "roll", "pitch", "yaw", "bgx", "bgy", "bgz", "bax", "bay", "baz",
                  "sigma_trace", "s_xx", "s_yy", "s_zz", "s_xy", "s_xz", "s_yz", "tilt_std", "ransac_iters")
 
 
-@dataclass
-class FrameSample:
-    """IMU summary of one frame of the BCD window: unit bias-corrected specific force ``acc_dir``,
-    gyro rotation vector ``rotvec`` from the previous frame (rad), ``dt`` (s), estimated ``tilt``."""
-
-    index: int
-    t_ns: int
-    t_prev_ns: int | None
-    acc_dir: np.ndarray
-    rotvec: np.ndarray
-    dt: float
-    tilt: np.ndarray
-
-
-def _tilt_of(R_wc: np.ndarray, R_ic: np.ndarray) -> np.ndarray:
-    return np.array(est.tilt_angles(R_wc @ R_ic.T))
-
-
-def _yaw_of(R_wi: np.ndarray) -> float:
-    return float(np.arctan2(R_wi[1, 0], R_wi[0, 0]))
-
-
-class GeviOdometry(KeyframeOdometry):
+class GeviOdometry(InertialInitialisation, KeyframeOdometry):
     name = "gevi"
     world_is_cam0 = False
     state_file = "imu_states.csv"
@@ -175,11 +152,11 @@ class GeviOdometry(KeyframeOdometry):
                 self.init_poses.append((res.index, t_ns, res.T_w_c.copy()))
             self._try_init(res)
         elif self.mode == GEVI and res.status == INERTIAL:
-            self.tilt = _tilt_of(res.T_w_c[:3, :3], self.R_ic)  # the gyro carried the attitude
+            self.tilt = tilt_of(res.T_w_c[:3, :3], self.R_ic)  # the gyro carried the attitude
         elif self.mode == GEVI and res.status != OK:
             self.tilt = self.tilt_pred  # the gyro carries the attitude over a lost frame
         elif self.mode == VISUAL:
-            self.tilt = _tilt_of(res.T_w_c[:3, :3], self.R_ic)
+            self.tilt = tilt_of(res.T_w_c[:3, :3], self.R_ic)
         if self.phase != INIT and self.still:
             self._update_standstill(res)
         if self.phase != INIT:
@@ -259,11 +236,11 @@ class GeviOdometry(KeyframeOdometry):
             # better relative tilt, the BCD's the gravity-anchored one.  A complementary blend keeps both
             # (the BA's alone drifts where vision is weak; the BCD's alone follows sustained accelerations):
             # [PROPOSAL] gain ``fusion.kf_tilt_gravity_gain``, measured in docs/method.md.
-            ba_tilt = _tilt_of(T[:3, :3], self.R_ic)
+            ba_tilt = tilt_of(T[:3, :3], self.R_ic)
             k = self.cfg.fusion.kf_tilt_gravity_gain
             self.kf_tilt = ba_tilt + k * np.array([est.wrap_angle(d) for d in self.tilt - ba_tilt])
         # keep R_WK exactly levelled by the keyframe tilt (the 4-DOF model's assumption)
-        yaw = _yaw_of(T[:3, :3] @ self.R_ic.T)
+        yaw = yaw_of(T[:3, :3] @ self.R_ic.T)
         T[:3, :3] = est.rot_z(yaw) @ est.levelling(*self.kf_tilt, self.R_ic)
         # the keyframe's written pose is the one the next frames chain from
         res.final = [(i, T.copy() if i == res.index else P) for i, P in res.final]
@@ -383,7 +360,8 @@ class GeviOdometry(KeyframeOdometry):
             E = np.array([x[1] for x in self.innovations])
             prior, dof = E.T @ E / len(E) + lo * np.eye(3), float(len(E))
         window = est.FusionWindow(p=m.p, cov=cov, q=m.q, sigma2=self.sigma2, R_ic=self.R_ic, acc_dir=acc,
-                                  gyro_inc=rot, gyro_var=noise.gyro_noise_density ** 2 * np.array(links), prior_mean=self.kf_tilt,
+                                  gyro_inc=rot, gyro_var=noise.gyro_noise_density ** 2 * np.array(links),
+                                  prior_mean=self.kf_tilt,
                                   prior_cov=self.kf_tilt_cov, psi0=psi, t0=t, lo=lo, hi=fc.sigma_hi ** 2,
                                   tilts0=tilts0, sigma_prior=prior, sigma_prior_dof=dof)
         t0 = time.perf_counter()
@@ -397,173 +375,6 @@ class GeviOdometry(KeyframeOdometry):
             s.tilt = tl.copy()  # (a merged link's sample is a copy: the folded frames keep their tilts)
         return state.R_ck(self.R_ic), state.t
 
-    # ------------------------------------------------------------------------- initialisation
-    def _try_init(self, res) -> None:
-        ic = self.cfg.init
-        t_ns = res.t_ns
-        elapsed = (t_ns - self.t_first) * 1e-9
-        if self.still:
-            ts, g, a = self.imu.window(self.t_first, t_ns)
-            rest = self._images_at_rest(res) and (len(ts) < 2 or imu_at_rest(g, a, ic.still_max_gyro_std, ic.still_max_acc_std,
-                                                           ic.still_max_gravity_err))
-            if not rest:
-                self.still = False
-            elif elapsed >= ic.still_min_s and len(ts) >= 2:
-                self._initialise_standstill(res, ts, g, a)
-                return
-        if not self.still and elapsed >= ic.window_s:
-            if self.next_init_try is not None and res.index < self.next_init_try:
-                return
-            self._initialise_moving(res, elapsed)
-
-    def _initialise_standstill(self, res, ts, g, a) -> None:
-        self.b_g = g.mean(0)
-        roll, pitch = tilt_from_specific_force(a.mean(0))
-        # V = the first frame's rectified cam0, which is where the platform still is
-        R_WV = est.levelling(roll, pitch, self.R_ic) @ res.T_w_c[:3, :3].T
-        self.init_info = {"method": "standstill", "at_s": (res.t_ns - self.t_first) * 1e-9,
-                          "standstill_s": (ts[-1] - ts[0]) * 1e-9}
-        self._enter_tracking(res, R_WV)
-
-    def _initialise_moving(self, res, elapsed: float) -> None:
-        ic = self.cfg.init
-        poses = self.init_poses[::max(ic.stride, 1)]
-        opts = est.InitOptions(ba_prior_sigma=ic.ba_prior_sigma, acc_noise_density=self.imu.noise.acc_noise_density,
-                               pose_pos_sigma=ic.pose_sigma_m)
-        try:
-            r = est.stereo_imu_init(np.array([p[1] for p in poses], dtype=np.int64),
-                                    np.array([p[2][:3, :3] for p in poses]), np.array([p[2][:3, 3] for p in poses]),
-                                    self.imu.t_ns, self.imu.gyro, self.imu.acc, self.R_ic, self.p_ic, opts)
-        except est.EstimatorError as err:
-            if elapsed + 0.5 < ic.max_window_s:
-                self.next_init_try = res.index + max(ic.stride, 1) * 5
-                self.init_info = {"failed_attempt": str(err)}
-                return
-            # last resort: gravity from the mean specific force (zero mean acceleration assumed)
-            _, g, a = self.imu.window(self.t_first, res.t_ns)
-            roll, pitch = tilt_from_specific_force(a.mean(0))
-            R_WV = est.levelling(roll, pitch, self.R_ic) @ self.init_poses[0][2][:3, :3].T
-            self.init_info = {"method": "mean-specific-force (stereo-IMU init failed: " + str(err) + ")",
-                              "at_s": elapsed}
-            self._enter_tracking(res, R_WV)
-            return
-        self.b_g, self.b_a = r.b_g.copy(), r.b_a.copy()
-        self.init_info = {"method": "stereo-imu", "at_s": elapsed, "poses": len(poses),
-                          "gravity_norm_linear": r.gravity_norm_linear, "rms_rot": r.rms_rot}
-        self._enter_tracking(res, r.R_WV)
-
-    def _enter_tracking(self, res, R_WV: np.ndarray) -> None:
-        """Re-express everything held in V in the gravity-aligned W; the held poses become final."""
-        T_WV = np.eye(4)
-        T_WV[:3, :3] = R_WV
-        self.pending = [(i, T_WV @ T) for i, T in self.pending]
-        res.T_w_c = T_WV @ res.T_w_c
-        if self.kf is not None:
-            self.kf.T_w_k = T_WV @ self.kf.T_w_k
-        if self.T_w_last is not None:
-            self.T_w_last = T_WV @ self.T_w_last
-        poses = dict(self.pending)
-        self.T_first = self.pending[0][1].copy() if self.pending else res.T_w_c.copy()
-        self.tilt = _tilt_of(res.T_w_c[:3, :3], self.R_ic)
-        s0 = (self.cfg.init.ba_prior_sigma / GRAVITY) ** 2  # the bias/tilt ambiguity floor (spec 9.6)
-        self.tilt_cov = np.eye(2) * s0
-        if self.kf is not None:
-            self.kf_tilt = _tilt_of(self.kf.T_w_k[:3, :3], self.R_ic)
-            self.kf_tilt_cov = np.eye(2) * s0
-        # the window since the keyframe, re-summarised with the biases now known
-        for s in self.win:
-            fs = self._resample(s)
-            s.acc_dir, s.rotvec = fs.acc_dir, fs.rotvec
-            if s.index in poses:
-                s.tilt = _tilt_of(poses[s.index][:3, :3], self.R_ic)
-        fs = self._resample(self.cur)
-        self.cur.acc_dir, self.cur.rotvec = fs.acc_dir, fs.rotvec
-        self.phase = GEVI
-        if self.cfg.fusion.mode == "4dof":
-            self._start_attitude_filter(res.t_ns)
-        if not self.cfg.ba.enabled:
-            res.final, self.pending = self.pending, []
-
-    def _resample(self, s: FrameSample) -> FrameSample:
-        saved = self.t_prev
-        self.t_prev = s.t_prev_ns
-        try:
-            return self._sample(s.index, s.t_ns)
-        finally:
-            self.t_prev = saved
-
-    def _start_attitude_filter(self, t_ns: int) -> None:
-        ts, g, a = self.imu.window(t_ns, int(self.imu.t_ns[-1]))
-        R0 = est.rtilt(*self.tilt)
-        f = GravityAttitudeFilter(R0, self.b_g, self.imu.noise, self.imu.dt_nominal, AttitudeFilterConfig(),
-                                  b_a=self.b_a)
-        self.attitude = run_filter(f, ts, g, a)
-
-    def _images_at_rest(self, res) -> bool:
-        """The camera has not moved since the first frame by more than ``init.still_max_flow_px`` of image
-        motion: f (rotation angle + translation / median keyframe depth), from the tracked pose (so it holds
-        across keyframes).  Before any keyframe (a textureless start) the images say nothing: True."""
-        if self.first_kf_index is None or res.index == 0:
-            return True
-        if res.status != OK or self.kf is None or len(self.kf) == 0:
-            return False
-        T0 = self.pending[0][1] if self.phase == INIT and self.pending else self.T_first
-        if T0 is None:
-            return False
-        D = np.linalg.inv(T0) @ res.T_w_c
-        angle = float(np.linalg.norm(est.log_so3(D[:3, :3])))
-        depth = float(np.median(self.kf.p[:, 2]))
-        motion_px = self.camera.f * (angle + np.linalg.norm(D[:3, 3]) / max(depth, 1e-3))
-        return motion_px <= self.cfg.init.still_max_flow_px
-
-    def _update_standstill(self, res) -> None:
-        """While the starting standstill lasts, the gyro bias is the mean rate over all of it."""
-        ic = self.cfg.init
-        ts, g, a = self.imu.window(self.t_first, res.t_ns)
-        if self._images_at_rest(res) and imu_at_rest(g, a, ic.still_max_gyro_std, ic.still_max_acc_std, ic.still_max_gravity_err):
-            self.b_g = g.mean(0)
-            self.init_info["standstill_s"] = (ts[-1] - ts[0]) * 1e-9
-        else:
-            self.still = False
-
-    def _refine_acc_bias(self, res) -> None:
-        """After a standstill start, the accelerometer bias (unobservable at rest) is estimated once from
-        the first ``init.window_s`` of continuously tracked motion: the stereo-IMU initialisation (spec 9) over those frames'
-        poses in W, of which only b_a is adopted (W, the tilts and the gyro bias of the standstill stay).
-        [PROPOSAL]; measured in docs/method.md 9b."""
-        ic = self.cfg.init
-        if not ic.refine_acc_bias or self.still or self.init_info.get("method") != "standstill" \
-                or "acc_bias_refined" in self.init_info:
-            return
-        if res.status != OK:
-            # 2 s of *visually tracked* motion: IMU-carried poses would feed the bias back into itself
-            # (measured on pool-hard_s1, 30 s: ATE 0.26 m -> 0.93 m when they were allowed)
-            self.bias_poses = []
-            return
-        self.bias_poses.append((res.t_ns, res.T_w_c.copy()))
-        if not self.bias_poses or (self.bias_poses[-1][0] - self.bias_poses[0][0]) * 1e-9 < ic.window_s:
-            return
-        poses = self.bias_poses[::max(ic.stride, 1)]
-        opts = est.InitOptions(ba_prior_sigma=ic.ba_prior_sigma, acc_noise_density=self.imu.noise.acc_noise_density,
-                               pose_pos_sigma=ic.pose_sigma_m, b_g0=self.b_g)
-        try:
-            r = est.stereo_imu_init(np.array([p[0] for p in poses], dtype=np.int64),
-                                    np.array([p[1][:3, :3] for p in poses]), np.array([p[1][:3, 3] for p in poses]),
-                                    self.imu.t_ns, self.imu.gyro, self.imu.acc, self.R_ic, self.p_ic, opts)
-        except est.EstimatorError as err:
-            self.init_info["acc_bias_refined"] = f"failed: {err}"
-            return
-        angle = float(np.arccos(np.clip(-r.gravity_V[2] / np.linalg.norm(r.gravity_V), -1.0, 1.0)))
-        info = {"at_s": (res.t_ns - self.t_first) * 1e-9, "b_a": r.b_a.tolist(), "gravity_angle_deg": np.degrees(angle)}
-        # consistency with the standstill: the bias may move gravity by at most the bias/tilt ambiguity
-        # (3 prior sigma / g) and must itself be plausible under its prior
-        limit = 3.0 * ic.ba_prior_sigma
-        if angle > limit / GRAVITY or np.linalg.norm(r.b_a) > limit:
-            info["rejected"] = f"inconsistent with the standstill (limit {limit:g} m/s^2)"
-        else:
-            self.b_a = r.b_a.copy()
-        self.init_info["acc_bias_refined"] = info
-
     # --------------------------------------------------------------------------------- output
     def _state_row(self, res) -> dict:
         phase = self.phase if self.phase == INIT else (res.status if res.status != OK else self.mode)
@@ -573,7 +384,7 @@ class GeviOdometry(KeyframeOdometry):
         S = self.Sigma
         tilt_std = float(np.sqrt(np.trace(self.tilt_cov) / 2)) if np.all(np.isfinite(self.tilt_cov)) else np.nan
         return {"index": res.index, "t_ns": res.t_ns, "phase": phase, "roll": float(self.tilt[0]),
-                "pitch": float(self.tilt[1]), "yaw": _yaw_of(R_wi), "bgx": self.b_g[0], "bgy": self.b_g[1],
+                "pitch": float(self.tilt[1]), "yaw": yaw_of(R_wi), "bgx": self.b_g[0], "bgy": self.b_g[1],
                 "bgz": self.b_g[2], "bax": self.b_a[0], "bay": self.b_a[1], "baz": self.b_a[2],
                 "sigma_trace": float(np.trace(S)), "s_xx": S[0, 0], "s_yy": S[1, 1], "s_zz": S[2, 2], "s_xy": S[0, 1],
                 "s_xz": S[0, 2], "s_yz": S[1, 2], "tilt_std": tilt_std,
