@@ -164,6 +164,23 @@ def build(source, kind: str, cfg, method: str, warn=None, start: int = 0):
     raise GeviError("--method", f"unknown method {method!r}")
 
 
+def _check_image_size(source, start: int, sequence) -> None:
+    """The first frame's images must have the calibration's size (else wrong intrinsics): one-line error."""
+    from gevi_cli.errors import DataError
+
+    try:
+        frame = source._read_pair(start)
+    except DataError:
+        return  # an unreadable frame is skipped by the driver and reported there
+    rig = source.calibration
+    for name, img, cam in (("cam0", frame.left, rig.cam0), ("cam1", frame.right, rig.cam1)):
+        h, w = np.asarray(img).shape[:2]
+        if (w, h) != tuple(cam.resolution):
+            where = getattr(source, "calibration_file", None) or sequence
+            raise GeviError(where, f"{name} images are {w}x{h} but the calibration is for "
+                                   f"{cam.resolution[0]}x{cam.resolution[1]}: wrong calibration for these images")
+
+
 def _imu_stream(source, kind: str, cfg, warn, start: int):
     """The checked IMU of ``source`` for GeVI (one-line errors, exit 2, for unusable input)."""
     from gevi_cli.inertial.imu_stream import ImuStream
@@ -236,6 +253,8 @@ def execute(req: RunRequest, echo=print) -> int:
         echo(f"gevi: warning: {msg}", err=True)
 
     echo(f"gevi run: method {method} ({why})")
+    if kind != "ov2slam-tracks":
+        _check_image_size(source, req.start, req.sequence)
     frontend, odometry = build(source, kind, cfg, req.method, warn=warn, start=req.start)
     seq_name = source.name
     run_dir = make_run_dir(req.out, Path(req.results_root), req.method, seq_name)

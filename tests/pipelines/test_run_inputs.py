@@ -55,3 +55,17 @@ def test_not_a_sequence(tmp_path, capsys):
     assert code == 2 and err.count("\n") == 1 and str(tmp_path) in err
     code, _, err = run_cli(["run", tmp_path / "missing"], capsys)
     assert code == 2 and "no such file or folder" in err
+
+
+@pytest.mark.parametrize("method", ["gevi", "cfo"])
+def test_calibration_for_other_image_size_is_one_line(pool_render, tmp_path, capsys, method):
+    """Intrinsics for another resolution would be silently wrong: refused with both sizes, exit 2."""
+    import shutil
+
+    d = tmp_path / "seq"
+    shutil.copytree(pool_render, d)
+    for cam in ("cam0", "cam1"):
+        y = d / "mav0" / cam / "sensor.yaml"
+        y.write_text(y.read_text().replace("resolution: [376, 240]", "resolution: [752, 480]"))
+    code, _, err = run_cli(["run", d, "--method", method, "-q", "-o", tmp_path / "r"], capsys)
+    assert code == 2 and err.count("\n") == 1 and "376x240" in err and "752x480" in err
