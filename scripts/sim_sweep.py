@@ -279,6 +279,23 @@ def run_one(seq_path: Path, seq_name: str, variant: str, run_dir: Path, log_path
 ONLINE = "traj_online_body.tum"
 
 
+
+def run_eval_command(cmd: list[str], eval_dir: Path, log: Path) -> dict:
+    """Run one `gevi eval` command, keep its log, and read the first result of its metrics.json."""
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    log.write_text(f"$ {' '.join(cmd)}\n# exit {proc.returncode}\n--- stdout\n{proc.stdout}--- stderr\n{proc.stderr}")
+    o: dict = {"returncode": proc.returncode}
+    metrics = read_json(eval_dir / "metrics.json")
+    if proc.returncode != 0 or not metrics or not metrics.get("results"):
+        o.update(status="failed", reason=tail(proc.stderr, 3) or f"exit {proc.returncode}")
+        return o
+    r = metrics["results"][0]
+    ate, rpe, assoc = r.get("ate") or {}, r.get("rpe") or {}, r.get("association") or {}
+    o.update(status=r.get("status"), reason=r.get("reason", ""), align=r.get("align"), ate_m=num(ate.get("trans_rmse")),
+             rpe_m=num(rpe.get("trans_rmse")), ate_rot_deg=num(ate.get("rot_rmse_deg")), matched=assoc.get("matched"),
+             coverage=num(assoc.get("coverage")), warnings=r.get("warnings", []))
+    return o
+
 def eval_online(rec: dict, seq_path: Path, eval_dir: Path, align: str) -> dict | None:
     """`gevi eval` of the run folder's online (as-tracked) trajectory ``traj_online_body.tum``.
 
@@ -294,19 +311,7 @@ def eval_online(rec: dict, seq_path: Path, eval_dir: Path, align: str) -> dict |
                             "--no-plots", "--no-kitti", "-q", "-o", str(eval_dir), "--overwrite"]
     o: dict = {"estimate": str(est), "eval_dir": str(eval_dir), "command": cmd}
     eval_dir.parent.mkdir(parents=True, exist_ok=True)
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    eval_dir.with_suffix(".log").write_text(f"$ {' '.join(cmd)}\n# exit {proc.returncode}\n--- stdout\n{proc.stdout}"
-                                            f"--- stderr\n{proc.stderr}")
-    o["returncode"] = proc.returncode
-    metrics = read_json(eval_dir / "metrics.json")
-    if proc.returncode != 0 or not metrics or not metrics.get("results"):
-        o.update(status="failed", reason=tail(proc.stderr, 3) or f"exit {proc.returncode}")
-        return o
-    r = metrics["results"][0]
-    ate, rpe, assoc = r.get("ate") or {}, r.get("rpe") or {}, r.get("association") or {}
-    o.update(status=r.get("status"), reason=r.get("reason", ""), align=r.get("align"), ate_m=num(ate.get("trans_rmse")),
-             rpe_m=num(rpe.get("trans_rmse")), ate_rot_deg=num(ate.get("rot_rmse_deg")), matched=assoc.get("matched"),
-             coverage=num(assoc.get("coverage")), warnings=r.get("warnings", []))
+    o.update(run_eval_command(cmd, eval_dir, eval_dir.with_suffix(".log")))
     return o
 
 
@@ -365,19 +370,7 @@ def eval_baseline(seq_path: Path, seq_name: str, bdir: Path, out: Path) -> dict 
     cmd = gevi_command() + ["eval", "--gt", str(seq_path), "-e", f"orbslam3={f_run}", "--est-frame", "cam0",
                             "--T-B-C0", str(tbc), "--align", "se3", "--no-plots", "-q", "-o", str(eval_dir), "--overwrite"]
     rec["command"] = cmd
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    (out / f"{seq_name}.log").write_text(f"$ {' '.join(cmd)}\n# exit {proc.returncode}\n--- stdout\n{proc.stdout}"
-                                         f"--- stderr\n{proc.stderr}")
-    rec["returncode"] = proc.returncode
-    metrics = read_json(eval_dir / "metrics.json")
-    if proc.returncode != 0 or not metrics or not metrics.get("results"):
-        rec.update(status="failed", reason=tail(proc.stderr, 3) or f"exit {proc.returncode}")
-        return rec
-    r = metrics["results"][0]
-    ate, rpe, assoc = r.get("ate") or {}, r.get("rpe") or {}, r.get("association") or {}
-    rec.update(status=r.get("status"), reason=r.get("reason", ""), ate_m=num(ate.get("trans_rmse")),
-               rpe_m=num(rpe.get("trans_rmse")), ate_rot_deg=num(ate.get("rot_rmse_deg")),
-               matched=assoc.get("matched"), coverage=num(assoc.get("coverage")), warnings=r.get("warnings", []))
+    rec.update(run_eval_command(cmd, eval_dir, out / f"{seq_name}.log"))
     return rec
 
 

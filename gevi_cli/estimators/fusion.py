@@ -340,17 +340,16 @@ def _check_window(w: FusionWindow) -> FusionWindow:
         sigma_prior_dof=finite_scalar(w.sigma_prior_dof, "sigma_prior_dof"))
 
 
-def _sigma_parts(Sigma, w: FusionWindow | None = None):
-    """(L^-1, the Sigma-only part of J per residual count: log det Sigma [+ prior terms / K])."""
+def _sigma_parts(Sigma, w: FusionWindow):
+    """(L^-1 with Sigma = L L^T, the Sigma-dependent part of J): K log det Sigma, plus with the
+    conjugate prior nu0 (tr(Sigma^-1 sigma_prior) + log det Sigma)."""
     Lc = np.linalg.cholesky(Sigma)
     Linv = np.linalg.inv(Lc)
     logdet = 2.0 * float(np.sum(np.log(np.diag(Lc))))
-    if w is not None and w.sigma_prior is not None and w.sigma_prior_dof > 0:
-        K = len(w.acc_dir)
-        nu = w.sigma_prior_dof
-        # K * returned value = K log det + nu (tr(Sigma^-1 Sigma_prior) + log det)
-        logdet += nu * (float(np.trace(Linv @ w.sigma_prior @ Linv.T)) + logdet) / K
-    return Linv, logdet
+    cost = len(w.acc_dir) * logdet
+    if w.sigma_prior is not None and w.sigma_prior_dof > 0:
+        cost += w.sigma_prior_dof * (float(np.trace(Linv @ w.sigma_prior @ Linv.T)) + logdet)
+    return Linv, cost
 
 
 def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm_iters=2, mu0=1e-4):
@@ -367,11 +366,12 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
     x = np.r_[w.psi0, w.t0, tilts0.ravel()]
     prob = _Problem(w, _chol2_inv(_vis_covariance(w, x)))
     Sigma = w.lo * np.eye(3)
-    Linv, logdet = _sigma_parts(Sigma, w)
+    Linv, c_sig = _sigma_parts(Sigma, w)
     r, ri, J = prob.evaluate(x, Linv)
     if r is None:
         raise DegenerateInput("bcd_refine: invalid initial estimate")
-    cost = float(r @ r) + K * logdet
+    cost = float(r @ r) + c_sig
+    scatter = None if w.sigma_prior is None else w.sigma_prior * w.sigma_prior_dof
     hist = [cost]
     mu = mu0
     for _ in range(max_iter):
@@ -391,7 +391,7 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
                 xn = x + d
                 rn, rin, Jn = prob.evaluate(xn, Linv)
                 if rn is not None:
-                    cn = float(rn @ rn) + K * logdet
+                    cn = float(rn @ rn) + c_sig
                     if cn < cost:
                         x, r, ri, J, cost = xn, rn, rin, Jn, cn
                         mu = max(mu / 10.0, 1e-12)
@@ -404,13 +404,12 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
         if adaptive:
             # exact block minimiser; a recomputed cost above the old one can only be rounding
             # (same Sigma up to 1e-16), in which case the old Sigma is kept
-            Sig_n = sigma_step(ri, w.lo, w.hi, w.sigma_prior * w.sigma_prior_dof if w.sigma_prior is not None else None,
-                               w.sigma_prior_dof)
-            Linv_n, logdet_n = _sigma_parts(Sig_n, w)
+            Sig_n = sigma_step(ri, w.lo, w.hi, scatter, w.sigma_prior_dof)
+            Linv_n, c_sig_n = _sigma_parts(Sig_n, w)
             r_n, ri_n, J_n = prob.evaluate(x, Linv_n)
-            c_n = float(r_n @ r_n) + K * logdet_n
+            c_n = float(r_n @ r_n) + c_sig_n
             if c_n <= cost:
-                Sigma, Linv, logdet, r, ri, J, cost = Sig_n, Linv_n, logdet_n, r_n, ri_n, J_n, c_n
+                Sigma, Linv, c_sig, r, ri, J, cost = Sig_n, Linv_n, c_sig_n, r_n, ri_n, J_n, c_n
             hist.append(cost)
         if start - cost < rel_tol * abs(start):
             break
@@ -429,13 +428,12 @@ def joint_cost(window: FusionWindow, state: FusionState, Sigma, x_init=None) -> 
     """J(chi, Sigma) of spec 8.2 for a state (Sigma_vis fixed at ``x_init``, default the window's
     initial estimate as in :func:`bcd_refine`)."""
     w = _check_window(window)
-    K = len(w.acc_dir)
     if x_init is None:
         tilts0 = propagate_tilts(w.prior_mean, w.gyro_inc) if w.tilts0 is None else w.tilts0
         x_init = np.r_[w.psi0, w.t0, tilts0.ravel()]
     prob = _Problem(w, _chol2_inv(_vis_covariance(w, x_init)))
-    Linv, logdet = _sigma_parts(np.asarray(Sigma, float), w)
+    Linv, c_sig = _sigma_parts(np.asarray(Sigma, float), w)
     r, _, _ = prob.evaluate(state.as_vector(), Linv, jac=False)
     if r is None:
         return np.inf
-    return float(r @ r) + K * logdet
+    return float(r @ r) + c_sig

@@ -27,9 +27,9 @@ import numpy as np
 
 from gevi_cli import estimators as est
 from gevi_cli.estimators.lie import right_jacobian
+from gevi_cli.estimators.initialization import GRAVITY
 from gevi_cli.inertial.imu_stream import ImuNoise
 
-GRAVITY = 9.81
 E3 = np.array([0.0, 0.0, 1.0])
 
 
@@ -163,10 +163,3 @@ def complementary(R_WI0: np.ndarray, b_g: np.ndarray, t_ns, gyro, acc, gain: flo
         R = R @ est.exp_so3(-gain * np.cross(g_B, a_dir[k + 1]))
         out[k + 1] = R
     return out
-
-
-def tilt_error(R_est: np.ndarray, R_ref: np.ndarray) -> np.ndarray:
-    """Angle (rad) between the gravity directions R^T e3 of two attitude arrays (yaw-free tilt error)."""
-    a = np.einsum("nji,j->ni", R_est, E3)
-    b = np.einsum("nji,j->ni", R_ref, E3)
-    return np.arccos(np.clip(np.sum(a * b, axis=1), -1.0, 1.0))

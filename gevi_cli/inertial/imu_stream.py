@@ -10,7 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gevi_cli import estimators as est
 from gevi_cli.errors import GeviError
+from gevi_cli.estimators.preintegration import imu_segment
 
 #: EuRoC ADIS16448 values, used (with a warning) when the dataset states no IMU noise.
 DEFAULT_NOISE = {"gyro_noise_density": 1.6968e-4, "gyro_random_walk": 1.9393e-5, "acc_noise_density": 2.0e-3,
@@ -32,16 +34,12 @@ class FrameImu:
     """What the IMU says about one frame interval (previous frame -> this frame).
 
     ``dR`` (3, 3): bias-corrected gyro rotation from the previous frame's body to this one;
-    ``rotvec`` = Log(dR) (rad); ``acc_mean`` (3,) mean raw specific force over the interval (m/s^2);
-    ``gyro_mean`` (3,) mean raw rate (rad/s); ``n`` samples; ``dt`` (s); ``gap`` True when the IMU does
-    not cover the interval (then ``dR`` is the identity and the rest NaN).
+    ``rotvec`` = Log(dR) (rad); ``n`` samples; ``dt`` (s); ``gap`` True when the IMU does not cover
+    the interval (then ``dR`` is the identity and ``n`` 0).
     """
 
     dR: np.ndarray
     rotvec: np.ndarray
-    acc_mean: np.ndarray
-    gyro_mean: np.ndarray
-    gyro_std: np.ndarray
     n: int
     dt: float
     gap: bool = False
@@ -52,6 +50,7 @@ class ImuStream:
 
     def __init__(self, t_ns, gyro, acc, noise: ImuNoise, time_offset_s: float = 0.0, source: str = "IMU",
                  max_gap_factor: float = 5.0):
+        """``max_gap_factor``: an interval longer than this many median sample periods is a gap."""
         t = np.asarray(t_ns, dtype=np.int64)
         gyro = np.asarray(gyro, dtype=np.float64)
         acc = np.asarray(acc, dtype=np.float64)
@@ -71,7 +70,7 @@ class ImuStream:
         self.max_gap_ns = int(max_gap_factor * self.dt_nominal * 1e9)
 
     @classmethod
-    def from_sequence(cls, imu, time_offset_s: float, source: str, warn=None) -> "ImuStream":
+    def from_sequence(cls, imu, time_offset_s: float, source: str, warn=None, max_gap_factor: float = 5.0) -> "ImuStream":
         """From a dataset's :class:`~gevi_cli.datasets.sequence.ImuData`; missing noise -> defaults + warning."""
         values, missing = {}, []
         for key, default in DEFAULT_NOISE.items():
@@ -82,7 +81,7 @@ class ImuStream:
             values[key] = float(v)
         if missing and warn is not None:
             warn(f"{source}: no IMU noise given for {', '.join(missing)}; using EuRoC ADIS16448 values")
-        return cls(imu.t_ns, imu.gyro, imu.acc, ImuNoise(**values), time_offset_s, source)
+        return cls(imu.t_ns, imu.gyro, imu.acc, ImuNoise(**values), time_offset_s, source, max_gap_factor)
 
     @property
     def rate_hz(self) -> float:
@@ -104,19 +103,13 @@ class ImuStream:
         return self.t_ns[i0:i1], self.gyro[i0:i1], self.acc[i0:i1]
 
     def interval(self, t0_ns: int, t1_ns: int, b_g: np.ndarray) -> FrameImu:
-        """Gyro rotation (zero-order hold, bias ``b_g`` removed) and mean specific force over [t0, t1]."""
-        from gevi_cli import estimators as est
-        from gevi_cli.estimators.preintegration import imu_segment
-
-        nan3 = np.full(3, np.nan)
+        """Gyro rotation over [t0, t1] (zero-order hold, bias ``b_g`` removed)."""
         if not self.covers(t0_ns, t1_ns):
-            return FrameImu(np.eye(3), np.zeros(3), nan3, nan3, nan3, 0, (t1_ns - t0_ns) * 1e-9, gap=True)
-        w, a, dts = imu_segment(self.t_ns, self.gyro, self.acc, t0_ns, t1_ns)
+            return FrameImu(np.eye(3), np.zeros(3), 0, (t1_ns - t0_ns) * 1e-9, gap=True)
+        w, _, dts = imu_segment(self.t_ns, self.gyro, self.acc, t0_ns, t1_ns)
         keep = dts > 0
-        w, a, dts = w[keep], a[keep], dts[keep]
+        w, dts = w[keep], dts[keep]
         dR = np.eye(3)
         for E in est.exp_so3((w - b_g) * dts[:, None]):  # one batched exp; few samples per frame interval
             dR = dR @ E
-        T = float(dts.sum())
-        return FrameImu(dR, est.log_so3(dR), (a * dts[:, None]).sum(0) / T, (w * dts[:, None]).sum(0) / T,
-                        w.std(0), len(w), T)
+        return FrameImu(dR, est.log_so3(dR), len(w), float(dts.sum()))

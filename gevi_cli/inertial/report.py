@@ -16,7 +16,8 @@ import numpy as np
 from gevi_cli import estimators as est
 from gevi_cli.inertial.attitude import AttitudeFilterConfig, GravityAttitudeFilter, complementary, gyro_only, run_filter
 from gevi_cli.inertial.imu_stream import ImuStream
-from gevi_cli.inertial.standstill import GRAVITY, StandstillEstimate, imu_at_rest, standstill_estimate
+from gevi_cli.inertial.standstill import (GRAVITY, StandstillEstimate, imu_at_rest, standstill_estimate,
+                                          tilt_from_specific_force)
 
 #: standstill detection on the IMU alone (no images here): windows of this length (s) ...
 STILL_WINDOW_S = 0.5
@@ -80,8 +81,6 @@ def imu_report(stream: ImuStream, gt=None, cfg: AttitudeFilterConfig = AttitudeF
     if start is not None:
         roll, pitch, b_g = start.roll, start.pitch, start.b_g
     else:
-        from gevi_cli.inertial.standstill import tilt_from_specific_force
-
         k = max(int(round(0.5 / stream.dt_nominal)), 1)
         roll, pitch = tilt_from_specific_force(a[:k].mean(0))
         b_g = np.zeros(3)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-GRAVITY = 9.81
+from gevi_cli.estimators.initialization import GRAVITY
 
 
 @dataclass(frozen=True)

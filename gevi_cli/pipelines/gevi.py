@@ -37,6 +37,7 @@ import numpy as np
 
 from gevi_cli import estimators as est
 from gevi_cli.frontend import FrontEnd
+from gevi_cli.estimators.preintegration import imu_segment, preintegrate
 from gevi_cli.inertial.imu_stream import ImuStream
 from gevi_cli.inertial.standstill import GRAVITY
 from gevi_cli.pipelines.config import OdometryConfig
@@ -115,19 +116,21 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         a = a.mean(0) - self.b_a
         return a / np.linalg.norm(a)
 
-    def _sample(self, index: int, t_ns: int) -> FrameSample:
+    def _sample(self, index: int, t_ns: int, t_prev_ns: int | None) -> FrameSample:
+        """IMU summary of frame ``index`` at ``t_ns`` (the gyro rotation since ``t_prev_ns``, NaN over a
+        gap) with the current bias estimates."""
         rotvec, dt = np.zeros(3), 0.0
-        if self.t_prev is not None:
-            fi = self.imu.interval(self.t_prev, t_ns, self.b_g)
-            rotvec, dt = fi.rotvec, (t_ns - self.t_prev) * 1e-9
+        if t_prev_ns is not None:
+            fi = self.imu.interval(t_prev_ns, t_ns, self.b_g)
+            rotvec, dt = fi.rotvec, (t_ns - t_prev_ns) * 1e-9
             if fi.gap:
                 rotvec = np.full(3, np.nan)
-        return FrameSample(index, t_ns, self.t_prev, self._acc_dir(t_ns), rotvec, dt, np.zeros(2))
+        return FrameSample(index, t_ns, t_prev_ns, self._acc_dir(t_ns), rotvec, dt, np.zeros(2))
 
     # ------------------------------------------------------------------------------ main entry
     def track(self, frame):
         t_ns = int(frame.t_ns)
-        self.cur = self._sample(self.index + 1, t_ns)
+        self.cur = self._sample(self.index + 1, t_ns, self.t_prev)
         gap = self.t_prev is not None and not np.all(np.isfinite(self.cur.rotvec))
         gap = gap or not np.all(np.isfinite(self.cur.acc_dir))
         if self.phase == INIT:
@@ -183,8 +186,6 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
             return self.T_w_last.copy(), INERTIAL
         if self.phase == INIT or self.t_prev is None or not self.imu.covers(self.t_prev, t_ns):
             return super()._bridge(t_ns)
-        from gevi_cli.estimators.preintegration import imu_segment, preintegrate
-
         g, a, dts = imu_segment(self.imu.t_ns, self.imu.gyro, self.imu.acc, self.t_prev, t_ns)
         pre = preintegrate(g, a, dts, self.b_g, self.b_a)
         T_B_C = np.asarray(self.camera.T_B_C0, dtype=float)

@@ -51,9 +51,7 @@ class InertialInitialisation:
         t_ns = res.t_ns
         elapsed = (t_ns - self.t_first) * 1e-9
         if self.still:
-            ts, g, a = self.imu.window(self.t_first, t_ns)
-            rest = self._images_at_rest(res) and (len(ts) < 2 or imu_at_rest(
-                g, a, ic.still_max_gyro_std, ic.still_max_acc_std, ic.still_max_gravity_err))
+            rest, (ts, g, a) = self._still_since_start(res)
             if not rest:
                 self.still = False
             elif elapsed >= ic.still_min_s and len(ts) >= 2:
@@ -119,26 +117,16 @@ class InertialInitialisation:
             self.kf_tilt = tilt_of(self.kf.T_w_k[:3, :3], self.R_ic)
             self.kf_tilt_cov = np.eye(2) * s0
         # the window since the keyframe, re-summarised with the biases now known
-        for s in self.win:
-            fs = self._resample(s)
+        for s in self.win + [self.cur]:
+            fs = self._sample(s.index, s.t_ns, s.t_prev_ns)
             s.acc_dir, s.rotvec = fs.acc_dir, fs.rotvec
-            if s.index in poses:
+            if s.index in poses and s is not self.cur:
                 s.tilt = tilt_of(poses[s.index][:3, :3], self.R_ic)
-        fs = self._resample(self.cur)
-        self.cur.acc_dir, self.cur.rotvec = fs.acc_dir, fs.rotvec
         self.phase = GEVI
         if self.cfg.fusion.mode == "4dof":
             self._start_attitude_filter(res.t_ns)
         if not self.cfg.ba.enabled:
             res.final, self.pending = self.pending, []
-
-    def _resample(self, s: FrameSample) -> FrameSample:
-        saved = self.t_prev
-        self.t_prev = s.t_prev_ns
-        try:
-            return self._sample(s.index, s.t_ns)
-        finally:
-            self.t_prev = saved
 
     def _start_attitude_filter(self, t_ns: int) -> None:
         ts, g, a = self.imu.window(t_ns, int(self.imu.t_ns[-1]))
@@ -164,12 +152,18 @@ class InertialInitialisation:
         motion_px = self.camera.f * (angle + np.linalg.norm(D[:3, 3]) / max(depth, 1e-3))
         return motion_px <= self.cfg.init.still_max_flow_px
 
-    def _update_standstill(self, res) -> None:
-        """While the starting standstill lasts, the gyro bias is the mean rate over all of it."""
+    def _still_since_start(self, res):
+        """(images and IMU at rest since the first frame, the IMU samples (t, gyro, acc) since then)."""
         ic = self.cfg.init
         ts, g, a = self.imu.window(self.t_first, res.t_ns)
-        if self._images_at_rest(res) and imu_at_rest(g, a, ic.still_max_gyro_std, ic.still_max_acc_std,
-                                                      ic.still_max_gravity_err):
+        rest = self._images_at_rest(res) and (len(ts) < 2 or imu_at_rest(
+            g, a, ic.still_max_gyro_std, ic.still_max_acc_std, ic.still_max_gravity_err))
+        return rest, (ts, g, a)
+
+    def _update_standstill(self, res) -> None:
+        """While the starting standstill lasts, the gyro bias is the mean rate over all of it."""
+        rest, (ts, g, a) = self._still_since_start(res)
+        if rest and len(ts) >= 2:
             self.b_g = g.mean(0)
             self.init_info["standstill_s"] = (ts[-1] - ts[0]) * 1e-9
         else:

@@ -197,8 +197,7 @@ def _imu_stream(source, kind: str, cfg, warn, start: int):
     offset = cfg.imu.time_offset_s
     if offset is None:
         offset = float(getattr(source, "imu_time_offset_s", 0.0) or 0.0)
-    stream = ImuStream.from_sequence(imu, offset, f"{name} (IMU)", warn)
-    stream.max_gap_ns = int(cfg.imu.max_gap_factor * stream.dt_nominal * 1e9)
+    stream = ImuStream.from_sequence(imu, offset, f"{name} (IMU)", warn, cfg.imu.max_gap_factor)
     t0 = int(source.stamps_ns[start])
     t_last = int(source.stamps_ns[-1])
     need = min(t0 + int(max(cfg.init.window_s, cfg.init.still_min_s) * 1e9), t_last)
