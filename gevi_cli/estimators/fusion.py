@@ -206,6 +206,7 @@ class _Problem:
         n = len(w.p)
         self.nv, self.ng, self.nc = 2 * n, 3 * self.K, 2 * (self.K - 1)
         self.dim = 4 + 2 * self.K
+        self._last = None  # (x, Sigma-free parts) of the last evaluation with a Jacobian
 
     def unpack(self, x):
         return x[0], x[1:4], x[4:].reshape(self.K, 2)
@@ -271,14 +272,22 @@ class _Problem:
         return r.ravel(), J.reshape(-1, self.dim)
 
     def evaluate(self, x, Lsig_inv, jac=True):
-        """Stacked whitened residuals (vis, gravity, chain, prior) [and Jacobian]; None if invalid."""
-        rv, Jv = self.vis(x, jac)
-        if rv is None:
-            return None, None, None
-        _, _, T = self.unpack(x)
-        ri, g, dgp, dgt = self.imu_raw(x)
-        rc, Jc = self.chain(T, g, dgp, dgt, jac)
-        rp = self.Wp @ np.array([wrap_angle(T[0, 0] - self.w.prior_mean[0]), T[0, 1] - self.w.prior_mean[1]])
+        """Stacked whitened residuals (vis, gravity, chain, prior) [and Jacobian]; None if invalid.
+
+        Only the gravity block depends on Sigma: the parts of the last state evaluated with a Jacobian
+        are kept, so the Sigma-step's re-evaluation at an unchanged state costs just the re-whitening."""
+        if jac and self._last is not None and np.array_equal(self._last[0], x):
+            rv, Jv, ri, dgp, dgt, rc, Jc, rp = self._last[1:]
+        else:
+            rv, Jv = self.vis(x, jac)
+            if rv is None:
+                return None, None, None
+            _, _, T = self.unpack(x)
+            ri, g, dgp, dgt = self.imu_raw(x)
+            rc, Jc = self.chain(T, g, dgp, dgt, jac)
+            rp = self.Wp @ np.array([wrap_angle(T[0, 0] - self.w.prior_mean[0]), T[0, 1] - self.w.prior_mean[1]])
+            if jac:
+                self._last = (x.copy(), rv, Jv, ri, dgp, dgt, rc, Jc, rp)
         r = np.concatenate([rv, (ri @ Lsig_inv.T).ravel(), rc, rp])
         if not jac:
             return r, ri, None
