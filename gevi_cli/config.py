@@ -100,27 +100,10 @@ def parse_set(items: typing.Iterable[str]) -> dict:
 
 
 def load_yaml(path: Path) -> dict:
-    """A YAML mapping; errors are one line with the file (and line when YAML knows it)."""
-    import yaml
+    """A config mapping of ``stage: {key: value}`` (empty file: ``{}``); errors are one line with file and line."""
+    from gevi_cli.datasets.yamlio import load_yaml as read_mapping
 
-    path = Path(path)
-    if not path.is_file():
-        raise GeviError(path, "no such config file")
-    text = path.read_text()
-    if text.startswith("%YAML"):  # OpenCV/EuRoC headers: PyYAML rejects the 1.0 directive
-        text = text.split("\n", 1)[1] if "\n" in text else ""
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        line = f":{mark.line + 1}" if mark is not None else ""
-        problem = getattr(exc, "problem", None) or "not valid YAML"
-        raise GeviError(f"{path}{line}", f"not valid YAML ({problem})") from None
-    if data is None:
-        return {}
-    if not isinstance(data, dict):
-        raise GeviError(path, "expected a mapping of stage: {key: value}")
-    return data
+    return read_mapping(Path(path), empty_ok=True, what="config file")
 
 
 def to_dict(cfg) -> dict:

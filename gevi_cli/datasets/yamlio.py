@@ -13,22 +13,36 @@ import yaml
 from gevi_cli.errors import DataError, GeviError
 
 
-def load_yaml(path: Path) -> dict:
+def load_yaml(path: Path, *, empty_ok: bool = False, what: str = "file") -> dict:
+    """A YAML mapping from ``path``; every error is one line naming the file (and the line).
+
+    Takes what real datasets write: OpenCV's ``%YAML:1.0`` directive (PyYAML rejects it; the line is
+    blanked, not dropped, so YAML's line numbers stay the file's), a UTF-8 BOM, CRLF line ends.
+    ``empty_ok``: an empty file is ``{}`` (configs) instead of an error.
+    """
+    path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8-sig")
     except FileNotFoundError:
-        raise GeviError(path, "no such file") from None
+        raise GeviError(path, f"no such {what}") from None
+    except IsADirectoryError:
+        raise GeviError(path, f"is a folder, expected a YAML {what}") from None
+    except (UnicodeDecodeError, OSError) as err:
+        raise DataError(path, f"cannot be read as text ({type(err).__name__})") from None
     lines = text.splitlines()
-    if lines and lines[0].startswith("%YAML"):
-        lines = lines[1:]
+    if lines and lines[0].startswith("%YAML") and ":" in lines[0]:
+        lines[0] = ""
     try:
         data = yaml.safe_load("\n".join(lines))
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
-        raise DataError(where, f"is not valid YAML ({getattr(err, 'problem', err)})") from None
+        problem = " ".join(str(getattr(err, "problem", None) or "syntax error").split())
+        raise DataError(where, f"is not valid YAML ({problem})") from None
+    if data is None and empty_ok:
+        return {}
     if not isinstance(data, dict):
-        raise DataError(path, "expected a YAML mapping")
+        raise DataError(path, "expected a YAML mapping" + (" (the file is empty)" if data is None else ""))
     return data
 
 

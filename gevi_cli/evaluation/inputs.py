@@ -210,15 +210,16 @@ def parse_named(spec: str, option: str) -> tuple[str, str]:
 
 # ---------------------------------------------------------------------------------------- hints
 def _read_hint(path: Path) -> dict:
-    try:
-        if path.suffix == ".json":
-            data = json.loads(path.read_text())
-        else:
-            import yaml
+    if path.suffix != ".json":
+        from gevi_cli.datasets.yamlio import load_yaml
 
-            data = yaml.safe_load(path.read_text())
-    except Exception as exc:  # a broken hint file is the user's to fix
-        raise GeviError(path, f"cannot read alignment hint: {exc}") from None
+        return load_yaml(path, empty_ok=True, what="alignment hint")
+    try:
+        data = json.loads(path.read_text(encoding="utf-8-sig"))
+    except json.JSONDecodeError as exc:  # a broken hint file is the user's to fix
+        raise GeviError(f"{path}:{exc.lineno}", f"alignment hint is not valid JSON ({exc.msg})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise GeviError(path, f"cannot read alignment hint ({type(exc).__name__})") from None
     return data if isinstance(data, dict) else {}
 
 
