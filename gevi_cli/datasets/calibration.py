@@ -130,11 +130,24 @@ class StereoRig:
     def rectification(self) -> Rectification:
         size = self.cam0.resolution
         R, t = self.R_rl, self.t_rl.reshape(3, 1)
+        # OpenCV wants contiguous float64 R and t: R_rl is a view into T_C1_C0 and cv2.fisheye's reshape
+        # refuses non-contiguous input ("the matrix is not continuous").
+        R, t = np.ascontiguousarray(R, dtype=np.float64), np.ascontiguousarray(t, dtype=np.float64)
         if self.cam0.distortion_model == "equidistant":
-            R0, R1, P0, P1, _ = cv2.fisheye.stereoRectify(
+            R0, R1, _, _, _ = cv2.fisheye.stereoRectify(
                 self.cam0.K, self.cam0.dist_coeffs, self.cam1.K, self.cam1.dist_coeffs, size, R, t,
                 flags=cv2.CALIB_ZERO_DISPARITY, newImageSize=size, balance=0.0, fov_scale=1.0,
             )
+            # Our choice of the rectified camera, not OpenCV's: its new-camera estimate fits the whole
+            # distorted border of a wide lens into the image (T265: focal 37 px from 285 px), which
+            # throws away the resolution the tracker needs.  We keep the lens's own focal (the smaller
+            # of the two cameras', so neither is upsampled) and the image centre as principal point:
+            # the rectified view is the central field of 2*atan(w/2f) (T265: 112 deg horizontally).
+            f = float(min(self.cam0.fx, self.cam0.fy, self.cam1.fx, self.cam1.fy))
+            K_rect = np.array([[f, 0.0, (size[0] - 1) / 2.0], [0.0, f, (size[1] - 1) / 2.0], [0.0, 0.0, 1.0]])
+            P0 = np.hstack([K_rect, np.zeros((3, 1))])
+            P1 = P0.copy()
+            P1[0, 3] = -f * float(np.linalg.norm(t))
             init = cv2.fisheye.initUndistortRectifyMap
         else:
             R0, R1, P0, P1, _, _, _ = cv2.stereoRectify(
