@@ -45,13 +45,14 @@ of ``<stem>_camchain.yaml``, ``camchain-imucam-<stem>.yaml``, ``camchain-<stem>.
 """
 from __future__ import annotations
 
-import struct
 from pathlib import Path
 from typing import Iterator
 
 import cv2
 import numpy as np
 
+from gevi_cli.datasets import bag_streams as streams
+from gevi_cli.datasets.bagfile import bag_root, describe_error, header_stamp, is_bag, open_reader
 from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.datasets.euroc import DEFAULT_PAIR_TOLERANCE_NS, camera_from_sensor_yaml
 from gevi_cli.datasets.kalibr import read_camchain, read_imu_noise
@@ -60,18 +61,16 @@ from gevi_cli.datasets.sequence import ImuData, Sequence, StereoFrame, pair_ster
 from gevi_cli.datasets.yamlio import load_yaml
 from gevi_cli.errors import DataError, GeviError, LayoutError
 from gevi_cli.trajectory import Trajectory, read_trajectory
-from gevi_cli.trajectory.validate import duplicate_stamp_mask, validate_rows
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED = "sensor_msgs/msg/CompressedImage"
 IMAGE_TYPES = (IMAGE, COMPRESSED)
-IMU_TYPES = ("sensor_msgs/msg/Imu",)
-GT_TYPES = ("geometry_msgs/msg/PoseStamped", "geometry_msgs/msg/PoseWithCovarianceStamped",
-            "geometry_msgs/msg/TransformStamped", "nav_msgs/msg/Odometry")
-ROLES = {"left": IMAGE_TYPES, "right": IMAGE_TYPES, "imu": IMU_TYPES, "gt": GT_TYPES}
-_ROLE_ALIASES = {"cam0": "left", "cam1": "right", "groundtruth": "gt", "imu0": "imu"}
+IMU_TYPES = (streams.IMU_TYPE,)
+GT_TYPES = streams.POSE_TYPES
+ROLES = {"left": IMAGE_TYPES, "right": IMAGE_TYPES, "imu": IMU_TYPES, "gyro": IMU_TYPES, "accel": IMU_TYPES,
+         "gt": GT_TYPES}
+_ROLE_ALIASES = {"cam0": "left", "cam1": "right", "groundtruth": "gt", "imu0": "imu", "acc": "accel"}
 _LEFT_WORDS, _RIGHT_WORDS = ("cam0", "left"), ("cam1", "right")
-_GT_WORDS = ("groundtruth", "ground_truth", "gt", "vicon", "mocap", "leica")
 
 # encoding -> (channels, bytes per channel, cv2 conversion to gray or None)
 _ENCODINGS = {
@@ -81,25 +80,6 @@ _ENCODINGS = {
     "bgra8": (4, 1, cv2.COLOR_BGRA2GRAY), "8uc4": (4, 1, cv2.COLOR_BGRA2GRAY), "rgba8": (4, 1, cv2.COLOR_RGBA2GRAY),
     "bgr16": (3, 2, cv2.COLOR_BGR2GRAY), "rgb16": (3, 2, cv2.COLOR_RGB2GRAY),
 }
-
-
-# ------------------------------------------------------------------------------------ detection
-def _bag_root(path: Path) -> Path:
-    """The bag itself for a path to a ROS2 bag's ``metadata.yaml``/``.db3``/``.mcap`` file."""
-    if path.is_file() and path.suffix != ".bag" and (path.parent / "metadata.yaml").is_file():
-        return path.parent
-    return path
-
-
-def _detect(path: Path) -> bool:
-    path = Path(path)
-    if path.is_file():
-        if path.suffix == ".bag":
-            return True
-        return (path.suffix in (".db3", ".mcap") or path.name == "metadata.yaml") and (path.parent / "metadata.yaml").is_file()
-    if path.is_dir() and (path / "metadata.yaml").is_file():
-        return any(p.suffix in (".db3", ".mcap") for p in path.iterdir())
-    return False
 
 
 def parse_topics(value) -> dict[str, str | None]:
@@ -123,36 +103,24 @@ def parse_topics(value) -> dict[str, str | None]:
     for role, topic in items:
         role = _ROLE_ALIASES.get(str(role).strip().lower(), str(role).strip().lower())
         if role not in ROLES:
-            raise GeviError("--topics", f"unknown role '{role}'; use left=, right=, imu=, gt= (none to skip imu/gt)")
+            raise GeviError("--topics", f"unknown role '{role}'; use left=, right=, imu= (or gyro= and accel=), gt= "
+                                        "(none to skip imu/gt)")
         if role in out:
             raise GeviError("--topics", f"'{role}=' given twice")
         topic = None if topic is None else str(topic).strip()
         if topic is None or topic.lower() in ("", "none"):
-            if role in ("left", "right"):
-                raise GeviError("--topics", f"{role}= needs an image topic")
+            if role in ("left", "right", "gyro", "accel"):
+                raise GeviError("--topics", f"{role}= needs a topic")
             topic = None
         out[role] = topic
+    if ("gyro" in out) != ("accel" in out):
+        raise GeviError("--topics", "gyro= and accel= go together (a split IMU: one topic each)")
+    if "imu" in out and "gyro" in out:
+        raise GeviError("--topics", "give either imu= or gyro= and accel=, not both")
     return out
 
 
 # -------------------------------------------------------------------------------- raw decoding
-def _header_stamp(raw, is2: bool) -> int:
-    """Header stamp (ns) of a serialized message that starts with ``std_msgs/Header``.
-
-    ROS1: ``uint32 seq, uint32 sec, uint32 nsec``; ROS2 CDR: 4-byte encapsulation header (byte 1 odd =
-    little endian), then ``int32 sec, uint32 nanosec``.  Both put the stamp at bytes 4..12.
-    """
-    if is2:
-        sec, nsec = struct.unpack_from("<iI" if raw[1] & 1 else ">iI", raw, 4)
-    else:
-        sec, nsec = struct.unpack_from("<II", raw, 4)
-    return sec * 1_000_000_000 + nsec
-
-
-def _stamp_ns(stamp) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-
-
 def image_to_gray(msg, msgtype: str, where: str) -> np.ndarray:
     """An ``Image``/``CompressedImage`` message as a (height, width) uint8 array."""
     if msgtype == COMPRESSED:
@@ -179,21 +147,6 @@ def image_to_gray(msg, msgtype: str, where: str) -> np.ndarray:
     return pixels
 
 
-def _pose_of(msg, msgtype: str):
-    if msgtype == "geometry_msgs/msg/TransformStamped":
-        p, q = msg.transform.translation, msg.transform.rotation
-    elif msgtype == "geometry_msgs/msg/PoseStamped":
-        p, q = msg.pose.position, msg.pose.orientation
-    else:  # Odometry, PoseWithCovarianceStamped
-        p, q = msg.pose.pose.position, msg.pose.pose.orientation
-    return (p.x, p.y, p.z), (q.w, q.x, q.y, q.z)
-
-
-def _describe(err: Exception) -> str:
-    text = " ".join(str(a) for a in err.args) if err.args else type(err).__name__
-    return text.strip() or type(err).__name__
-
-
 # ------------------------------------------------------------------------------------- reader
 @register("rosbag")
 class RosbagSequence(Sequence):
@@ -204,16 +157,16 @@ class RosbagSequence(Sequence):
     overriding the bag's ground-truth topic), ``pair_tolerance_ns``.
     """
 
-    detect = staticmethod(_detect)
+    detect = staticmethod(is_bag)
 
     def __init__(self, path: Path, topics=None, calib: str | Path | None = None,
                  imu_calib: str | Path | None = None, groundtruth: str | Path | None = None,
                  pair_tolerance_ns: int = DEFAULT_PAIR_TOLERANCE_NS):
         super().__init__()
-        self.path = _bag_root(Path(path))
+        self.path = bag_root(Path(path))
         if not self.path.exists():
             raise GeviError(self.path, "no such file or folder")
-        self._name = self.path.stem if self.path.suffix == ".bag" else self.path.resolve().name
+        self._name = self.path.stem if self.path.is_file() else self.path.resolve().name
         requested = parse_topics(topics)
         for option, value in (("--calib", calib), ("--imu-calib", imu_calib), ("--groundtruth", groundtruth)):
             if value is not None and not Path(value).exists():
@@ -226,49 +179,30 @@ class RosbagSequence(Sequence):
             self._rig, calib_topics, noise, imu_topic_hint = self._load_calibration(calib, imu_calib)
             self.topics = self._select_topics(available, requested, calib_topics, imu_topic_hint,
                                               skip_gt=groundtruth is not None)
-            conns = {role: [c for c in reader.connections if c.topic == topic]
-                     for role, topic in self.topics.items() if topic is not None}
-            self._msgtype = {role: available[topic] for role, topic in self.topics.items() if topic is not None}
-            scan = self._scan(reader, conns)
+            scan = self._scan(reader)
         finally:
             reader.close()
         self._build_pairs(scan["left"], scan["right"], pair_tolerance_ns)
         self._check_image_sizes(scan["sizes"])
-        self._imu = self._make_imu(scan.get("imu"), noise)
+        self._imu = self._make_imu(scan["samples"], noise)
         if groundtruth is not None:
             gt = read_trajectory(groundtruth, name="groundtruth", frame="body")
             self.warnings.extend(gt.meta["warnings"])
             self._gt = gt
         else:
-            self._gt = self._make_groundtruth(scan.get("gt"))
+            gt_topic = self.topics["gt"]
+            self._gt = (None if gt_topic is None else
+                        streams.build_groundtruth(str(self.path), gt_topic, scan["samples"][gt_topic], self.warnings))
 
     # ----------------------------------------------------------------------------- opening
     def _open_reader(self):
-        try:
-            from rosbags.highlevel import AnyReader
-            from rosbags.typesys import Stores, get_typestore
-        except ImportError:
-            raise GeviError(self.path, "reading ROS bags needs the 'rosbags' package (pip install rosbags)") from None
-
-        is2 = self.path.suffix != ".bag"
-        try:
-            reader = AnyReader([self.path], default_typestore=get_typestore(Stores.ROS2_HUMBLE if is2 else Stores.ROS1_NOETIC))
-            reader.open()
-        except GeviError:
-            raise
-        except Exception as err:
-            hint = "" if is2 else "; a bag whose recording was interrupted needs 'rosbag reindex'"
-            raise DataError(self.path, f"cannot read the {'ROS2' if is2 else 'ROS1'} bag ({_describe(err)}){hint}") from err
-        return reader
+        return open_reader(self.path)
 
     def _bag_error(self, what: str) -> LayoutError:
         return LayoutError(self.path, what)
 
     def _search_dirs(self) -> list[tuple[Path, str]]:
-        stem = self.path.stem if self.path.suffix == ".bag" else self.path.name
-        if self.path.is_dir():
-            return [(self.path, stem), (self.path.parent, stem)]
-        return [(self.path.parent, stem)]
+        return search_dirs(self.path)
 
     def _load_calibration(self, calib, imu_calib):
         """(rig, camchain topics, IMU noise dict, IMU topic named by imu.yaml or None)."""
@@ -289,14 +223,7 @@ class RosbagSequence(Sequence):
             else:
                 camchain_file = calib
         else:
-            camchain_file = None
-            for folder, stem in self._search_dirs():
-                for name in (f"{stem}_camchain.yaml", f"camchain-imucam-{stem}.yaml", f"camchain-{stem}.yaml", "camchain.yaml"):
-                    if (folder / name).is_file():
-                        camchain_file = folder / name
-                        break
-                if camchain_file is not None:
-                    break
+            camchain_file = find_camchain(self.path)
             if camchain_file is None:
                 stem = self._search_dirs()[0][1]
                 raise GeviError(self.path, f"no camera calibration (a ROS bag carries none): pass --calib with a Kalibr "
@@ -310,27 +237,7 @@ class RosbagSequence(Sequence):
         else:
             self.calibration_file = Path(calib)
 
-        if imu_calib is not None:
-            noise_files.insert(0, Path(imu_calib))
-        dirs = self._search_dirs()
-        if camchain_file is not None:
-            chain_stem = camchain_file.stem
-            for suffix in ("_camchain", "-camchain"):
-                chain_stem = chain_stem.removesuffix(suffix)
-            dirs.append((camchain_file.parent, chain_stem))
-        for folder, stem in dirs:
-            noise_files += [folder / f"{stem}_imu.yaml", folder / f"imu-{stem}.yaml", folder / "imu.yaml"]
-        noise, topic_hint = {}, None
-        for file in noise_files:
-            if file.is_file():
-                noise = read_imu_noise(file)
-                self.imu_calibration_file = file
-                data = load_yaml(file) if file.name != "sensor.yaml" else {}
-                topic = data.get("rostopic") or (data.get("imu0") or {}).get("rostopic")
-                topic_hint = str(topic) if topic else None
-                break
-        else:
-            self.imu_calibration_file = None
+        noise, topic_hint, self.imu_calibration_file = find_imu_noise(self.path, imu_calib, camchain_file, noise_files)
         return rig, calib_topics, noise, topic_hint
 
     def _select_topics(self, available: dict[str, str], requested: dict, calib_topics: dict, imu_hint, skip_gt: bool):
@@ -389,40 +296,20 @@ class RosbagSequence(Sequence):
             self.warnings.append(f"{self.path}: image topic(s) {listing(unused)} not used "
                                  f"(left {chosen['left']}, right {chosen['right']})")
 
-        if "imu" in requested:
-            chosen["imu"] = requested["imu"]
-        elif by_type["imu"]:
-            candidates = by_type["imu"]
-            chosen["imu"] = imu_hint if imu_hint in candidates else candidates[0]
-            if len(candidates) > 1:
-                self.warnings.append(f"{self.path}: {len(candidates)} IMU topics ({listing(candidates)}); using "
-                                     f"{chosen['imu']} (override with --topics imu=TOPIC)")
-        else:
-            chosen["imu"] = None
-        if skip_gt:
-            chosen["gt"] = None
-        elif "gt" in requested:
-            chosen["gt"] = requested["gt"]
-        elif by_type["gt"]:
-            candidates = by_type["gt"]
-            named = [t for t in candidates if _names(t, _GT_WORDS)]
-            chosen["gt"] = (named or candidates)[0]
-            if len(candidates) > 1 or not named:
-                self.warnings.append(f"{self.path}: took {chosen['gt']} ({available[chosen['gt']]}) as ground truth "
-                                     f"(pose topics: {listing(candidates)}; override with --topics gt=TOPIC or gt=none)")
-        else:
-            chosen["gt"] = None
+        self.imu_topics = choose_imu_topics(self.path, available, requested, imu_hint, self.warnings)
+        chosen["imu"] = self.imu_topics.describe() if self.imu_topics else None
+        chosen["gt"] = None if skip_gt else choose_gt_topic(self.path, available, requested, self.warnings)
         return chosen
 
-    def _scan(self, reader, conns: dict[str, list]) -> dict:
+    def _scan(self, reader) -> dict:
         """One pass over the selected topics: image index entries, IMU and ground-truth messages."""
-        role_of = {role: topic for role, topic in self.topics.items() if topic is not None}
-        topic_role = {topic: role for role, topic in role_of.items()}
+        topic_role = {topic: role for role, topic in self.topics.items() if topic is not None and role != "imu"}
+        for topic in (self.imu_topics.names if self.imu_topics else ()):
+            topic_role[topic] = "imu"
         images = {"left": ([], []), "right": ([], [])}  # (header stamps, bag times)
         sizes: dict[str, tuple[int, int]] = {}
-        imu = ([], [], [])
-        gt = ([], [], [])
-        everything = [c for cs in conns.values() for c in cs]
+        samples = {topic: streams.TopicSamples.empty() for topic, role in topic_role.items() if role in ("imu", "gt")}
+        everything = [c for c in reader.connections if c.topic in topic_role]
         is2 = reader.is2
         count = 0
         try:
@@ -430,45 +317,38 @@ class RosbagSequence(Sequence):
                 role = topic_role[conn.topic]
                 count += 1
                 if role in ("left", "right"):
-                    images[role][0].append(_header_stamp(raw, is2))
+                    images[role][0].append(header_stamp(raw, is2))
                     images[role][1].append(bag_ns)
                     if role not in sizes:
                         msg = reader.deserialize(raw, conn.msgtype)
                         sizes[role] = image_to_gray(msg, conn.msgtype, f"{self.path}:{conn.topic}").shape[::-1]
                 elif role == "imu":
-                    msg = reader.deserialize(raw, conn.msgtype)
-                    w, a = msg.angular_velocity, msg.linear_acceleration
-                    imu[0].append(_stamp_ns(msg.header.stamp))
-                    imu[1].append((w.x, w.y, w.z))
-                    imu[2].append((a.x, a.y, a.z))
+                    samples[conn.topic].add_imu(reader.deserialize(raw, conn.msgtype), bag_ns)
                 else:
-                    msg = reader.deserialize(raw, conn.msgtype)
-                    p, q = _pose_of(msg, conn.msgtype)
-                    gt[0].append(_stamp_ns(msg.header.stamp))
-                    gt[1].append(p)
-                    gt[2].append(q)
+                    samples[conn.topic].add_pose(reader.deserialize(raw, conn.msgtype), conn.msgtype, bag_ns)
         except GeviError:
             raise
         except Exception as err:
             raise DataError(self.path, f"cannot read message {count + 1} of the selected topics "
-                                       f"({_describe(err)}); the bag may be truncated or corrupt") from err
-        out = {"sizes": sizes}
+                                       f"({describe_error(err)}); the bag may be truncated or corrupt") from err
+        out = {"sizes": sizes, "samples": samples}
         for side in ("left", "right"):
             out[side] = (np.array(images[side][0], dtype=np.int64), np.array(images[side][1], dtype=np.int64))
-        if "imu" in role_of:
-            out["imu"] = imu
-        if "gt" in role_of:
-            out["gt"] = gt
         return out
 
     def _build_pairs(self, left, right, tolerance_ns: int) -> None:
+        """Pair left/right by stamp; keeps per side (stamp used, bag time, raw header stamp) to find them again."""
         sides = {}
-        for side, (stamps, bag_ns) in (("left", left), ("right", right)):
+        offsets = {}
+        for side, (header, bag_ns) in (("left", left), ("right", right)):
             topic = self.topics[side]
-            if len(stamps) == 0:
+            if len(header) == 0:
                 raise self._bag_error(f"{side} image topic {topic} has no messages")
+            offsets[topic] = streams.clock_offset_ns(header, bag_ns)
+            stamps, kept = streams.timed(f"{self.path}:{topic}", header, bag_ns, self.warnings)
+            header, bag_ns = header[kept], bag_ns[kept]
             order = np.argsort(stamps, kind="stable")
-            stamps, bag_ns = stamps[order], bag_ns[order]
+            stamps, bag_ns, header = stamps[order], bag_ns[order], header[order]
             keep = np.ones(len(stamps), dtype=bool)
             keep[1:] = np.diff(stamps) != 0
             if keep.sum() < 0.5 * len(stamps):
@@ -478,13 +358,14 @@ class RosbagSequence(Sequence):
             if not keep.all():
                 self.warnings.append(f"{self.path}: {topic}: {int((~keep).sum())} image(s) repeat a header stamp; "
                                      "kept the first of each")
-            sides[side] = (stamps[keep], bag_ns[keep])
-        (t0, b0), (t1, b1) = sides["left"], sides["right"]
+            sides[side] = (stamps[keep], bag_ns[keep], header[keep])
+        self._image_clock = offsets
+        (t0, b0, h0), (t1, b1, h1) = sides["left"], sides["right"]
         names = (f"{self.path}: {self.topics['left']}", f"{self.path}: {self.topics['right']}")
         i0, i1 = pair_stereo(t0, t1, tolerance_ns, names, self.path, self.warnings)
         self._stamps = t0[i0]
-        self._left = (t0[i0], b0[i0])
-        self._right = (t1[i1], b1[i1])
+        self._left = (h0[i0], b0[i0])
+        self._right = (h1[i1], b1[i1])
 
     def _check_image_sizes(self, sizes) -> None:
         for side, cam in (("left", self._rig.cam0), ("right", self._rig.cam1)):
@@ -492,54 +373,20 @@ class RosbagSequence(Sequence):
                 self.warnings.append(f"{self.path}: {self.topics[side]} images are {sizes[side][0]}x{sizes[side][1]} "
                                      f"but the calibration ({self.calibration_file}) says {cam.width}x{cam.height}")
 
-    def _make_imu(self, imu, noise) -> ImuData | None:
-        if imu is None:
+    def _make_imu(self, samples, noise) -> ImuData | None:
+        if self.imu_topics is None:
             return None
-        topic = self.topics["imu"]
-        t = np.array(imu[0], dtype=np.int64)
-        if len(t) == 0:
-            self.warnings.append(f"{self.path}: IMU topic {topic} has no messages")
-            return None
-        gyro = np.array(imu[1], dtype=np.float64).reshape(-1, 3)
-        acc = np.array(imu[2], dtype=np.float64).reshape(-1, 3)
-        bad = ~(np.isfinite(gyro).all(axis=1) & np.isfinite(acc).all(axis=1))
-        if bad.any():
-            raise DataError(f"{self.path}:{topic}", f"IMU message {int(np.argmax(bad)) + 1} contains a non-finite value")
-        order = np.argsort(t, kind="stable")
-        t, gyro, acc = t[order], gyro[order], acc[order]
-        keep = np.ones(len(t), dtype=bool)
-        keep[1:] = np.diff(t) != 0
-        if not keep.all():
-            self.warnings.append(f"{self.path}: {topic}: {int((~keep).sum())} IMU message(s) repeat a header stamp; "
-                                 "kept the first of each")
-            t, gyro, acc = t[keep], gyro[keep], acc[keep]
-        if not noise:
+        imu = streams.build_imu(str(self.path), self.imu_topics, samples, noise, self.warnings)
+        if imu is not None and not noise:
             self.warnings.append(f"{self.path}: no IMU noise model found (pass --imu-calib with a Kalibr imu.yaml, or put "
                                  f"{self._search_dirs()[0][1]}_imu.yaml next to the bag)")
-        return ImuData(t, gyro, acc, **noise)
-
-    def _make_groundtruth(self, gt) -> Trajectory | None:
-        if gt is None:
-            return None
-        topic = self.topics["gt"]
-        if len(gt[0]) == 0:
-            self.warnings.append(f"{self.path}: ground-truth topic {topic} has no messages")
-            return None
-        t = np.array(gt[0], dtype=np.int64)
-        order = np.argsort(t, kind="stable")
-        t = t[order]
-        pos = np.array(gt[1], dtype=np.float64).reshape(-1, 3)[order]
-        q = np.array(gt[2], dtype=np.float64).reshape(-1, 4)[order]
-        lines = order + 1  # message numbers in bag order, for messages
-        where = f"{self.path}:{topic}"
-        warnings: list[str] = []
-        keep = duplicate_stamp_mask(where, lines, t, warnings)
-        t, pos, q, lines = t[keep], pos[keep], q[keep], lines[keep]
-        q = validate_rows(where, lines, t, pos, quat_wxyz=q, warnings=warnings)
-        self.warnings.extend(warnings)
-        traj = Trajectory(t, pos, q, frame="body", name="groundtruth")
-        traj.meta.update({"path": where, "format": "rosbag", "warnings": warnings})
-        return traj
+        if imu is not None:
+            clocks = dict(self._image_clock)
+            for topic in self.imu_topics.names:
+                s = samples[topic]
+                clocks[topic] = streams.clock_offset_ns(np.array(s.header_ns), np.array(s.bag_ns))
+            streams.check_same_clock(str(self.path), clocks, self.warnings)
+        return imu
 
     # --------------------------------------------------------------------------------- metadata
     @property
@@ -560,12 +407,12 @@ class RosbagSequence(Sequence):
         topic = self.topics[side]
         try:
             for conn, _, raw in reader.messages(connections=self._connections(reader, side), start=at, stop=at + 1):
-                if _header_stamp(raw, reader.is2) == stamp:
+                if header_stamp(raw, reader.is2) == stamp:
                     return image_to_gray(reader.deserialize(raw, conn.msgtype), conn.msgtype, f"{self.path}:{topic}")
         except GeviError:
             raise
         except Exception as err:
-            raise DataError(self.path, f"cannot read the {topic} image stamped {stamp} ns ({_describe(err)})") from err
+            raise DataError(self.path, f"cannot read the {topic} image stamped {stamp} ns ({describe_error(err)})") from err
         raise DataError(self.path, f"the {topic} image stamped {stamp} ns has disappeared from the bag (was it modified?)")
 
     def _read_pair(self, index: int) -> StereoFrame:
@@ -596,7 +443,7 @@ class RosbagSequence(Sequence):
             try:
                 for conn, bag_ns, raw in reader.messages(connections=conns, start=int(times.min()), stop=int(times.max()) + 1):
                     side = side_of[conn.topic]
-                    pos = wanted.pop((side, bag_ns, _header_stamp(raw, reader.is2)), None)
+                    pos = wanted.pop((side, bag_ns, header_stamp(raw, reader.is2)), None)
                     if pos is None:
                         continue
                     pending.setdefault(pos, {})[side] = (conn.msgtype, raw)
@@ -610,7 +457,7 @@ class RosbagSequence(Sequence):
             except GeviError:
                 raise
             except Exception as err:
-                raise DataError(self.path, f"cannot read images ({_describe(err)}); the bag may be truncated or "
+                raise DataError(self.path, f"cannot read images ({describe_error(err)}); the bag may be truncated or "
                                            "corrupt") from err
             if next_pos < len(selected):
                 raise DataError(self.path, f"{len(selected) - next_pos} image pair(s) indexed on open were not found "
@@ -640,6 +487,76 @@ class RosbagSequence(Sequence):
             self.close()
         except Exception:
             pass
+
+
+def search_dirs(path: Path) -> list[tuple[Path, str]]:
+    """(folder, stem) pairs where calibration files of the bag at ``path`` are looked for."""
+    stem = path.stem if path.is_file() else path.name
+    if path.is_dir():
+        return [(path, stem), (path.parent, stem)]
+    return [(path.parent, stem)]
+
+
+def find_camchain(path: Path) -> Path | None:
+    """The first Kalibr camchain next to (or, for a ROS2 folder, inside) the bag, by the documented names."""
+    for folder, stem in search_dirs(path):
+        for name in (f"{stem}_camchain.yaml", f"camchain-imucam-{stem}.yaml", f"camchain-{stem}.yaml", "camchain.yaml"):
+            if (folder / name).is_file():
+                return folder / name
+    return None
+
+
+def find_imu_noise(path: Path, imu_calib, camchain_file: Path | None = None, first: list[Path] | None = None):
+    """(noise dict, IMU topic the imu.yaml names or None, file or None): ``imu_calib``, then ``first``
+    (an EuRoC calib folder's imu0/sensor.yaml), then ``<stem>_imu.yaml``, ``imu-<stem>.yaml``,
+    ``imu.yaml`` next to the bag and next to the camchain."""
+    files = ([Path(imu_calib)] if imu_calib is not None else []) + list(first or [])
+    dirs = search_dirs(path)
+    if camchain_file is not None:
+        chain_stem = camchain_file.stem
+        for suffix in ("_camchain", "-camchain"):
+            chain_stem = chain_stem.removesuffix(suffix)
+        dirs.append((camchain_file.parent, chain_stem))
+    for folder, stem in dirs:
+        files += [folder / f"{stem}_imu.yaml", folder / f"imu-{stem}.yaml", folder / "imu.yaml"]
+    for file in files:
+        if file.is_file():
+            data = load_yaml(file) if file.name != "sensor.yaml" else {}
+            topic = data.get("rostopic") or (data.get("imu0") or {}).get("rostopic")
+            return read_imu_noise(file), (str(topic) if topic else None), file
+    return {}, None, None
+
+
+def choose_imu_topics(where, available: dict[str, str], requested: dict, hint: str | None, warnings: list[str]):
+    """The IMU topic(s) (:class:`~.bag_streams.ImuTopics`) or None, by ``--topics``, then the bag's shape."""
+    imu = sorted(t for t, ty in available.items() if ty in IMU_TYPES)
+    if "imu" in requested:
+        return None if requested["imu"] is None else streams.ImuTopics(single=requested["imu"])
+    if "gyro" in requested:
+        return streams.ImuTopics(gyro=requested["gyro"], accel=requested["accel"])
+    if not imu:
+        return None
+    if len(imu) == 1:
+        return streams.ImuTopics(single=imu[0])
+    if hint in imu:
+        return streams.ImuTopics(single=hint)
+    pair = streams.split_imu_pair(imu)
+    if pair is not None:
+        warnings.append(f"{where}: gyroscope and accelerometer on two topics ({pair[0]}, {pair[1]}); merged them, "
+                        "accelerometer interpolated to the gyro stamps (choose with --topics gyro=...,accel=...)")
+        return streams.ImuTopics(gyro=pair[0], accel=pair[1])
+    warnings.append(f"{where}: {len(imu)} IMU topics ({', '.join(imu)}); using {imu[0]} (override with --topics "
+                    "imu=TOPIC, or gyro=TOPIC,accel=TOPIC for a split IMU)")
+    return streams.ImuTopics(single=imu[0])
+
+
+def choose_gt_topic(where, available: dict[str, str], requested: dict, warnings: list[str]) -> str | None:
+    if "gt" in requested:
+        return requested["gt"]
+    topic, warning = streams.ground_truth_topic({t: ty for t, ty in available.items() if ty in GT_TYPES})
+    if warning:
+        warnings.append(f"{where}: {warning}")
+    return topic
 
 
 def _names(topic: str, words) -> bool:

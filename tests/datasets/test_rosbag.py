@@ -317,7 +317,7 @@ def _tiny_bag(path: Path, image_topics=("/cam0/image_raw", "/cam1/image_raw"), r
         for topic in image_topics:
             b.image(topic, t, img)
         if imu:
-            b.imu("/imu0", t, (0, 0, 0), (0, 0, 9.81))
+            b.imu("/imu0", t, (1e-3, -2e-3, 5e-4), (0, 0, 9.81))  # a real gyro is never exactly zero
     b.write(path)
     if camchain:
         _tiny_camchain(path.parent / "camchain.yaml")
