@@ -10,15 +10,52 @@ from gevi_cli.commands.options import add_sequence_options, sequence_kwargs
 @click.argument("path", type=click.Path())
 @add_sequence_options
 def command(path, kind, groundtruth, calib, imu_calib, topics, cameras):
-    """Describe the sequence at PATH: kind, sensors, rates, counts, duration, calibration, GT coverage."""
+    """Describe the sequence at PATH: kind, sensors, rates, counts, duration, calibration, GT coverage.
+
+    A ROS bag is described whatever it holds (topics, types, counts, image sizes and encodings, IMU
+    rate and gaps, pose topics), with the gevi commands that can use it.
+    """
+    from gevi_cli.datasets import open_sequence
+    from gevi_cli.datasets.bagfile import is_bag
+    from gevi_cli.datasets.registry import detect_kind
+
+    options = sequence_kwargs(groundtruth, calib, topics, cameras, imu_calib)
+    echo = click.echo
+    if (kind or detect_kind(path)) == "rosbag" and is_bag(path):
+        _describe_bag(path, options, echo)
+        return
+    _describe_sequence(open_sequence(path, kind=kind, **options), path, echo)
+
+
+def _describe_bag(path, options, echo) -> None:
+    """Any bag: its inventory, then the stereo sequence when it is one, or why `gevi run` cannot use it."""
+    from gevi_cli.datasets import open_sequence
+    from gevi_cli.datasets.bag_inventory import describe, inventory, usable_by
+    from gevi_cli.errors import GeviError
+
+    inv = inventory(path)
+    try:
+        seq = open_sequence(path, kind="rosbag", **options)
+        problem = None
+    except GeviError as err:
+        if (err.where or "").startswith("--") or err.message.startswith("--"):
+            raise  # the user's own option is wrong: that is the error, not a property of the bag
+        seq, problem = None, err.message if err.where in (None, str(inv.path), str(path)) else err.one_line()
+    if seq is not None:
+        _describe_sequence(seq, path, echo)
+    else:
+        echo(f"sequence      {inv.path.stem if inv.path.is_file() else inv.path.name}  (rosbag)")
+        echo(f"path          {path}")
+    for line in describe(inv) + usable_by(inv, problem):
+        echo(line)
+
+
+def _describe_sequence(seq, path, echo) -> None:
     import numpy as np
 
-    from gevi_cli.datasets import open_sequence
     from gevi_cli.datasets.coverage import frame_coverage
 
-    seq = open_sequence(path, kind=kind, **sequence_kwargs(groundtruth, calib, topics, cameras, imu_calib))
     rig = seq.calibration
-    echo = click.echo
     echo(f"sequence      {seq.name}  ({seq.kind})")
     echo(f"path          {path}")
     echo(f"stereo        {len(seq)} stereo pairs at {seq.frame_rate_hz:.1f} Hz over {seq.duration_s:.2f} s")

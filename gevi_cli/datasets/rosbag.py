@@ -176,6 +176,7 @@ class RosbagSequence(Sequence):
         try:
             self.is_ros2 = reader.is2
             available = {name: info.msgtype for name, info in reader.topics.items()}
+            self._check_stereo_topics(available)  # before the calibration: no images is the first thing to say
             self._rig, calib_topics, noise, imu_topic_hint = self._load_calibration(calib, imu_calib)
             self.topics = self._select_topics(available, requested, calib_topics, imu_topic_hint,
                                               skip_gt=groundtruth is not None)
@@ -240,6 +241,15 @@ class RosbagSequence(Sequence):
         noise, topic_hint, self.imu_calibration_file = find_imu_noise(self.path, imu_calib, camchain_file, noise_files)
         return rig, calib_topics, noise, topic_hint
 
+    def _check_stereo_topics(self, available: dict[str, str]) -> None:
+        images = sorted(t for t, ty in available.items() if ty in IMAGE_TYPES)
+        if not images:
+            everything = ", ".join(f"{t} ({ty})" for t, ty in sorted(available.items())) or "none"
+            raise self._bag_error(f"no image topics (sensor_msgs/Image or sensor_msgs/CompressedImage); a stereo "
+                                  f"sequence needs two; topics: {everything}")
+        if len(images) == 1:
+            raise self._bag_error(f"only one image topic ({images[0]}); a stereo sequence needs two, left and right")
+
     def _select_topics(self, available: dict[str, str], requested: dict, calib_topics: dict, imu_hint, skip_gt: bool):
         by_type = {role: sorted(t for t, ty in available.items() if ty in types) for role, types in ROLES.items()}
         images = by_type["left"]
@@ -257,11 +267,6 @@ class RosbagSequence(Sequence):
             if available[topic] not in ROLES[role]:
                 raise self._bag_error(f"--topics {role}={topic}: the topic has type {available[topic]}, expected "
                                       f"{' or '.join(ROLES[role])}")
-        if not images:
-            everything = ", ".join(f"{t} ({ty})" for t, ty in sorted(available.items())) or "none"
-            raise self._bag_error(f"no image topics (sensor_msgs/Image or sensor_msgs/CompressedImage); topics: {everything}")
-        if len(images) == 1:
-            raise self._bag_error(f"only one image topic ({images[0]}); a stereo sequence needs two, left and right")
 
         chosen: dict[str, str | None] = {}
         for side in ("left", "right"):

@@ -19,11 +19,22 @@ def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind,
     path = Path(sequence)
     if not path.exists():
         raise GeviError(path, "no such file or folder")
-    seq = open_sequence(path, kind=kind, **sequence_kwargs(groundtruth, calib, topics, cameras, imu_calib))
+    from gevi_cli.datasets.bagfile import is_bag
+    from gevi_cli.datasets.registry import detect_kind
+
+    warn = lambda m: echo(f"gevi: warning: {m}", err=True)  # noqa: E731
+    if (kind or detect_kind(path)) == "rosbag" and is_bag(path):
+        # a bag's IMU needs neither images nor a camera calibration (IMU-only bags are reports too)
+        from gevi_cli.datasets.bag_imu import BagImu
+
+        seq = BagImu(path, topics=topics, imu_calib=imu_calib, groundtruth=groundtruth)
+        for message in seq.warnings:
+            warn(message)
+    else:
+        seq = open_sequence(path, kind=kind, **sequence_kwargs(groundtruth, calib, topics, cameras, imu_calib))
     imu = seq.imu
     if imu is None or len(imu) < 2:
-        raise GeviError(path, "has no IMU data")
-    warn = lambda m: echo(f"gevi: warning: {m}", err=True)  # noqa: E731
+        raise GeviError(path, "has no IMU data" if imu is None else "has fewer than 2 IMU samples")
     offset = imu_time_offset if imu_time_offset is not None else float(getattr(seq, "imu_time_offset_s", 0.0) or 0.0)
     stream = ImuStream.from_sequence(imu, offset, f"{path} (IMU)", warn)
     gt = seq.groundtruth
