@@ -391,3 +391,65 @@ def test_cli_info_reports_bag_errors(tmp_path, capsys):
     garbage.write_bytes(b"junk")
     code, _, err = run_cli(["info", garbage], capsys)
     assert code == 2 and err.startswith(f"gevi: error: {garbage}: cannot read the ROS1 bag") and err.count("\n") == 1
+
+
+# ------------------------------------------------------------------------------------ time stamps
+def _stamp_bag(path: Path, imu_header, image_header=lambda t: t, split=False):
+    """Images and IMU with bag (receive) times ``t + 3 ms``; header stamps from the given functions."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    b = BagBuilder(ros2=False)
+    img = np.zeros((6, 8), dtype=np.uint8)
+    for k in range(5):
+        t = 2_000_000_000 + k * 50_000_000
+        for topic in ("/cam0/image_raw", "/cam1/image_raw"):
+            b.image(topic, image_header(t), img, bag_ns=t + 3_000_000)
+    for k in range(50):
+        t = 2_000_000_000 + k * 5_000_000
+        if split:
+            b.imu("/camera/gyro/sample", imu_header(t, k), (0.1, 0.2, 0.3), (0, 0, 0), bag_ns=t + 3_000_000)
+            if k % 2 == 0:
+                b.imu("/camera/accel/sample", imu_header(t, k), (0, 0, 0), (0.0, 0.1 * k, 9.81), bag_ns=t + 3_000_000)
+        else:
+            b.imu("/imu0", imu_header(t, k), (1e-3, -2e-3, 5e-4), (0, 0, 9.81), bag_ns=t + 3_000_000)
+    b.write(path)
+    _tiny_camchain(path.parent / "camchain.yaml")
+    return path
+
+
+def test_zero_header_stamps_fall_back_to_receive_time_with_a_warning(tmp_path):
+    seq = open_sequence(_stamp_bag(tmp_path / "a" / "z.bag", imu_header=lambda t, k: 0))
+    np.testing.assert_array_equal(seq.imu.t_ns, 2_003_000_000 + np.arange(50) * 5_000_000)
+    assert any("/imu0: every header stamp is zero" in w and "receive times" in w for w in seq.warnings)
+    np.testing.assert_array_equal(seq.stamps_ns, 2_000_000_000 + np.arange(5) * 50_000_000)  # images: headers
+    # images without header stamps are paired on their receive times
+    seq = open_sequence(_stamp_bag(tmp_path / "b" / "zi.bag", imu_header=lambda t, k: t, image_header=lambda t: 0))
+    np.testing.assert_array_equal(seq.stamps_ns, 2_003_000_000 + np.arange(5) * 50_000_000)
+
+
+def test_some_zero_stamps_are_dropped_and_counted(tmp_path):
+    seq = open_sequence(_stamp_bag(tmp_path / "p.bag", imu_header=lambda t, k: 0 if k in (3, 17) else t))
+    assert len(seq.imu) == 48 and 0 not in seq.imu.t_ns
+    assert any("/imu0: 2 of 50 message(s) have a zero header stamp; dropped" in w for w in seq.warnings)
+
+
+def test_clocks_that_disagree_are_reported_with_the_numbers(tmp_path):
+    seq = open_sequence(_stamp_bag(tmp_path / "c.bag", imu_header=lambda t, k: t + 7_000_000_000))
+    offsets = [w for w in seq.warnings if "different clocks" in w]
+    assert len(offsets) == 1 and "+6.997 s" in offsets[0] and "-0.003 s" in offsets[0]
+    assert any("/imu0: header stamps are +6.997 s from the bag's receive times" in w for w in seq.warnings)
+
+
+def test_split_imu_topics_merge_by_name_or_by_option(tmp_path):
+    bag = _stamp_bag(tmp_path / "s.bag", imu_header=lambda t, k: t, split=True)
+    seq = open_sequence(bag)
+    assert seq.imu_topics.split and any("merged them" in w for w in seq.warnings)
+    # gyro samples inside the accelerometer's span (0..48 of 50), accel interpolated: a_y = 0.1 k
+    np.testing.assert_array_equal(seq.imu.t_ns, 2_000_000_000 + np.arange(49) * 5_000_000)
+    np.testing.assert_allclose(seq.imu.acc[:, 1], 0.1 * np.arange(49), atol=1e-12)
+    np.testing.assert_allclose(seq.imu.gyro, np.tile([0.1, 0.2, 0.3], (49, 1)))
+    same = open_sequence(bag, topics="gyro=/camera/gyro/sample,accel=/camera/accel/sample")
+    np.testing.assert_array_equal(same.imu.acc, seq.imu.acc)
+    # swapped: the "gyro" topic has zero rates, named in one line
+    assert "/camera/accel/sample: the gyroscope is all zeros" in _error(
+        bag, topics="gyro=/camera/accel/sample,accel=/camera/gyro/sample")
+    assert _error(bag, topics="gyro=/camera/gyro/sample").startswith("--topics: gyro= and accel= go together")
