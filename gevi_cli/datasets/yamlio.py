@@ -13,11 +13,21 @@ import yaml
 from gevi_cli.errors import DataError, GeviError
 
 
+class _OpenCVLoader(yaml.SafeLoader):
+    """Safe loading plus OpenCV FileStorage's ``!!opencv-matrix`` (ORB-SLAM3 settings, cv2 calibration
+    output): read as the plain ``{rows, cols, dt, data}`` mapping that :func:`matrix` takes."""
+
+
+_OpenCVLoader.add_constructor("tag:yaml.org,2002:opencv-matrix", yaml.SafeLoader.construct_mapping)
+_OpenCVLoader.add_constructor("tag:yaml.org,2002:opencv-nd-matrix", yaml.SafeLoader.construct_mapping)
+
+
 def load_yaml(path: Path, *, empty_ok: bool = False, what: str = "file") -> dict:
     """A YAML mapping from ``path``; every error is one line naming the file (and the line).
 
     Takes what real datasets write: OpenCV's ``%YAML:1.0`` directive (PyYAML rejects it; the line is
-    blanked, not dropped, so YAML's line numbers stay the file's), a UTF-8 BOM, CRLF line ends.
+    blanked, not dropped, so YAML's line numbers stay the file's) and ``!!opencv-matrix`` tags, a
+    UTF-8 BOM, CRLF line ends.
     ``empty_ok``: an empty file is ``{}`` (configs) instead of an error.
     """
     path = Path(path)
@@ -33,7 +43,7 @@ def load_yaml(path: Path, *, empty_ok: bool = False, what: str = "file") -> dict
     if lines and lines[0].startswith("%YAML") and ":" in lines[0]:
         lines[0] = ""
     try:
-        data = yaml.safe_load("\n".join(lines))
+        data = yaml.load("\n".join(lines), Loader=_OpenCVLoader)  # noqa: S506 (a SafeLoader subclass)
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f"{path}:{mark.line + 1}" if mark is not None else str(path)

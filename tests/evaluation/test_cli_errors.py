@@ -118,3 +118,44 @@ def test_frame_conversion_and_mixup_warning(tmp_path):
     line = _one_error_line(run_cli(["--gt", gt_file, "-e", f"cam={est_file}", "--est-frame", "cam0", "-o",
                                     tmp_path / "x"], tmp_path))
     assert "--T-B-C0" in line
+
+
+def test_T_B_C0_from_an_euroc_sensor_yaml_and_yaml_errors_in_one_line(tmp_path):
+    """`--T-B-C0 mav0/cam0/sensor.yaml` takes the file the EuRoC reader takes (its %YAML:1.0 header);
+    a broken YAML anywhere is one line with file and line."""
+    from support import shared_path
+
+    from gevi_cli.datasets.yamlio import load_yaml, matrix
+
+    sensor = shared_path("euroc_micro", "mav0", "cam0", "sensor.yaml")
+    assert sensor.read_text().startswith("%YAML:1.0")
+    gt = synthetic(n=300)
+    T_B_C0 = matrix(load_yaml(sensor)["T_BS"], sensor, "T_BS")
+    est_file = write_tum(gt.with_sensor_frame(T_B_C0, "cam0"), tmp_path / "cam.tum")
+    gt_file = write_tum(gt, tmp_path / "gt.tum")
+    p = run_cli(["--gt", gt_file, "-e", f"cam={est_file}", "--est-frame", "cam0", "--T-B-C0", sensor,
+                 "--no-plots", "-o", tmp_path / "ok"], tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert json.loads((tmp_path / "ok/metrics.json").read_text())["results"][0]["ate"]["trans_rmse"] < 1e-6
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("%YAML:1.0\nT_BS: !!opencv-matrix\n  rows: 4\n  data: [1, 0, 0\n  cols: 4\n")
+    line = _one_error_line(run_cli(["--gt", gt_file, "-e", f"cam={est_file}", "--est-frame", "cam0", "--T-B-C0",
+                                    broken, "--no-plots", "-o", tmp_path / "x"], tmp_path))
+    assert f"{broken}:" in line and "not valid YAML" in line
+
+
+def test_T_B_C0_from_an_opencv_filestorage_yaml(tmp_path):
+    """OpenCV FileStorage YAML (``%YAML:1.0``, ``---``, ``!!opencv-matrix``, CRLF): what cv2 and ORB-SLAM3 write."""
+    gt = synthetic(n=300)
+    T = np.eye(4)
+    T[:3, 3] = [0.1, -0.2, 0.05]
+    cv = tmp_path / "cv.yaml"
+    data = ", ".join(f"{v:.17g}" for v in T.ravel())
+    cv.write_bytes(f"%YAML:1.0\r\n---\r\nT_B_C0: !!opencv-matrix\r\n   rows: 4\r\n   cols: 4\r\n   dt: d\r\n"
+                   f"   data: [ {data} ]\r\n".encode())
+    est_file = write_tum(gt.with_sensor_frame(T, "cam0"), tmp_path / "cam.tum")
+    gt_file = write_tum(gt, tmp_path / "gt.tum")
+    p = run_cli(["--gt", gt_file, "-e", f"cam={est_file}", "--est-frame", "cam0", "--T-B-C0", cv,
+                 "--no-plots", "-o", tmp_path / "ok"], tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert json.loads((tmp_path / "ok/metrics.json").read_text())["results"][0]["ate"]["trans_rmse"] < 1e-6
