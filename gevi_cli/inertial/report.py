@@ -99,8 +99,8 @@ def _flags(stream: ImuStream, start: StandstillEstimate | None) -> list[str]:
                    "scale wrong (g instead of m/s^2?)")
     peak = float(np.abs(stream.gyro).max())
     if (start is not None and np.linalg.norm(start.b_g) > 0.5) or peak > 35.0:
-        out.append(f"gyro looks like deg/s, not rad/s (|rate at rest| {np.linalg.norm(start.b_g) if start else float('nan'):.3g}, "
-                   f"peak {peak:.3g})")
+        at_rest = f"|rate at rest| {np.linalg.norm(start.b_g):.3g} rad/s, " if start is not None else ""
+        out.append(f"gyro looks like deg/s, not rad/s ({at_rest}peak {peak:.3g})")
     if start is None:
         out.append("the stream does not start at rest: levelled from the first 0.5 s of specific force, gyro bias 0")
     return out
