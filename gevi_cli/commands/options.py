@@ -11,7 +11,8 @@ sequence_options = [
                  help="Bags: Kalibr camchain YAML or EuRoC mav0 folder; track exports: KITTI calib.txt."),
     click.option("--imu-calib", "imu_calib", default=None, type=click.Path(dir_okay=False),
                  help="Bags: Kalibr imu.yaml with the IMU noise model."),
-    click.option("--topics", default=None, help="Bags: left=/cam0/image_raw,right=/cam1/image_raw,imu=/imu0,gt=/pose"),
+    click.option("--topics", default=None, help="Bags: left=/cam0/image_raw,right=/cam1/image_raw,imu=/imu0,gt=/pose "
+                                                "(a split IMU: gyro=TOPIC,accel=TOPIC; none skips imu/gt)"),
     click.option("--cameras", type=click.Choice(["gray", "color"]), default=None, help="KITTI: which stereo pair."),
 ]
 

@@ -1,4 +1,4 @@
-"""ROS bags: ROS1 ``.bag`` files and ROS2 bag folders (``metadata.yaml`` + ``.db3``/``.mcap``).
+"""ROS bags as stereo(-inertial) sequences: ROS1 ``.bag``, ROS2 folders, lone ``.mcap``/``.db3`` (:mod:`.bagfile`).
 
 Read with :class:`rosbags.highlevel.AnyReader` (pure Python, no ROS install); message types come
 from the definitions stored in the bag, or the ROS2 Humble typestore for ROS2 bags without them.
@@ -23,13 +23,11 @@ Which image topic is left/right, in order of precedence:
    first is left, with a warning).  With more than two and a side unidentified: an error asking for
    ``--topics``.
 
-IMU and ground truth: the one topic of that type; with several, the IMU named in the Kalibr imu.yaml
-``rostopic`` or else the first in sorted order, and for ground truth the first whose name contains
-``groundtruth``/``ground_truth``/``gt``/``vicon``/``mocap``/``leica`` (else the first in sorted order);
-a warning names the choice.
-
-Stamps are the message header stamps (never the bag receive time); left and right are paired by
-stamp within ``pair_tolerance_ns`` (:func:`~gevi_cli.datasets.sequence.pair_stereo`).
+IMU and ground truth: chosen by the rules of :mod:`.bag_streams` (one IMU topic, the imu.yaml
+``rostopic``, or a split gyro/accel pair merged; ground truth only from a topic named as such or a
+motion-capture transform).  Stamps are the message header stamps (never silently the bag receive time:
+see :mod:`.bag_streams`); left and right are paired by stamp within ``pair_tolerance_ns``
+(:func:`~gevi_cli.datasets.sequence.pair_stereo`).
 
 Images are not held in memory: opening reads the bag once, keeping for every image message only
 its header stamp and bag time (parsed from the first bytes of the serialized message), plus all
