@@ -90,9 +90,11 @@ def read_camchain(path: Path) -> Camchain:
         T_cam_imu[name] = matrix(block["T_cam_imu"], path, f"{name}.T_cam_imu") if "T_cam_imu" in block else None
         shift = block.get("timeshift_cam_imu", 0.0)
         try:
-            shift = float(shift)
+            shift = yaml_real(shift)
         except (TypeError, ValueError):
             raise DataError(path, f"'{name}.timeshift_cam_imu' is not a number") from None
+        if not math.isfinite(shift):
+            raise DataError(path, f"'{name}.timeshift_cam_imu' is not finite")
         shifts[name] = shift
     T_C1_C0 = matrix(data["cam1"]["T_cn_cnm1"], path, "cam1.T_cn_cnm1") if "T_cn_cnm1" in data["cam1"] else None
 
@@ -132,16 +134,18 @@ def _intrinsics(block: dict, path: Path, name: str) -> PinholeCamera:
     if model != "pinhole":
         raise DataError(path, f"{name}.camera_model '{model}' is not supported (only pinhole)")
     try:
-        fu, fv, cu, cv = (float(v) for v in require(block, "intrinsics", f"{path}: {name}"))
-        width, height = (int(v) for v in require(block, "resolution", f"{path}: {name}"))
+        fu, fv, cu, cv = (yaml_real(v) for v in require(block, "intrinsics", f"{path}: {name}"))
+        width, height = (yaml_whole(v) for v in require(block, "resolution", f"{path}: {name}"))
     except (TypeError, ValueError):
         raise DataError(path, f"{name}: 'intrinsics' must be [fu, fv, cu, cv] and 'resolution' [width, height]") from None
+    if width <= 0 or height <= 0:
+        raise DataError(path, f"{name}: 'resolution' must be positive, got [{width}, {height}]")
     dist_name = str(block.get("distortion_model", "none")).lower()
     if dist_name not in _DISTORTION:
         raise DataError(path, f"{name}.distortion_model '{dist_name}' is not supported (radtan, equidistant, none)")
     dist = _DISTORTION[dist_name]
     try:
-        coeffs = tuple(float(c) for c in (block.get("distortion_coeffs") or []))
+        coeffs = tuple(yaml_real(c) for c in (block.get("distortion_coeffs") or []))
     except (TypeError, ValueError):
         raise DataError(path, f"{name}.distortion_coeffs must be a list of numbers") from None
     if dist == "none":
@@ -153,6 +157,22 @@ def _intrinsics(block: dict, path: Path, name: str) -> PinholeCamera:
     if not all(math.isfinite(v) for v in (fu, fv, cu, cv, *coeffs)) or fu <= 0 or fv <= 0:
         raise DataError(path, f"{name}: intrinsics must be finite with fu, fv > 0")
     return PinholeCamera(width, height, fu, fv, cu, cv, dist, coeffs)
+
+
+def yaml_real(value) -> float:
+    """A YAML number: int, float or a string of one (PyYAML reads ``1e-3``, without a dot, as a
+    string); not a bool (``true`` is not 1.0), a list or a mapping."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise TypeError(f"not a number: {value!r}")
+    return float(value)
+
+
+def yaml_whole(value) -> int:
+    """A YAML whole number (752 or 752.0; 752.5 is refused, not truncated)."""
+    value = yaml_real(value)
+    if not math.isfinite(value) or value != int(value):
+        raise ValueError(f"not a whole number: {value!r}")
+    return int(value)
 
 
 def _with_pose(cam: PinholeCamera, T_B_C: np.ndarray) -> PinholeCamera:
@@ -170,7 +190,7 @@ def read_imu_noise(path: Path) -> dict[str, float]:
     for key, name in IMU_NOISE_KEYS.items():
         if key in data:
             try:
-                value = float(data[key])
+                value = yaml_real(data[key])
             except (TypeError, ValueError):
                 raise DataError(path, f"'{key}' is not a number") from None
             if not math.isfinite(value) or value < 0:
