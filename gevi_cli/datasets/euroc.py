@@ -21,7 +21,7 @@ from gevi_cli.datasets.sequence import ImuData, Sequence, StereoFrame, pair_ster
 from gevi_cli.datasets.yamlio import load_yaml, matrix, require
 from gevi_cli.errors import DataError, GeviError, LayoutError
 from gevi_cli.trajectory import Trajectory, read_trajectory
-from gevi_cli.trajectory.formats import read_text
+from gevi_cli.trajectory.formats import _is_number, _looks_like_header, read_text
 
 _DISTORTION_NAMES = {
     "radial-tangential": "radtan", "radtan": "radtan", "plumb_bob": "radtan",
@@ -78,25 +78,20 @@ def read_csv_rows(path: Path, what: str) -> list[tuple[int, list[str]]]:
     """
     text = read_text(path)
     rows: list[tuple[int, list[str]]] = []
+    first = True
     for lineno, raw in enumerate(text.splitlines(), start=1):
         line = raw.strip()
         if not line or line.startswith("#"):
             continue
         tokens = [t.strip() for t in line.split(",")]
-        if not rows and not any(_is_number(t) for t in tokens):
+        if first and _looks_like_header(tokens):
+            first = False
             continue  # an unmarked header (timestamp,filename)
+        first = False
         rows.append((lineno, tokens))
     if not rows:
         raise DataError(path, f"lists no {what}" + (" (the file is empty)" if not text.strip() else ""))
     return rows
-
-
-def _is_number(token: str) -> bool:
-    try:
-        float(token)
-        return True
-    except ValueError:
-        return False
 
 
 def _stamp_ns(token: str, path: Path, lineno: int) -> int:

@@ -8,6 +8,7 @@ next to it).  Option ``cameras="gray"`` (default when image_0 exists) or ``"colo
 """
 from __future__ import annotations
 
+import re
 from functools import cached_property
 from pathlib import Path
 
@@ -35,8 +36,13 @@ def read_calib(path: Path) -> dict[str, np.ndarray]:
         raise LayoutError(path.parent, "missing calib.txt")
     out = {}
     for lineno, line in enumerate(read_text(path).splitlines(), start=1):
-        key, _, rest = line.partition(":")
+        if not line.strip():
+            continue
+        key, colon, rest = line.partition(":")
         key = key.strip()
+        if not colon or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", key):
+            raise DataError(f"{path}:{lineno}", f"is not a 'key: values' line (KITTI calib.txt rows are "
+                                                f"'P0: 12 numbers'): {line.strip()[:40]!r}")
         if key not in _P_KEYS:
             continue
         try:

@@ -49,13 +49,14 @@ def _load_table(path: Path):
 
     Lines are split at commas when the first data line has one, else at whitespace (spaces, tabs).
     Blank lines and ``#``/``%`` comments are skipped; a line before the first data row none of whose
-    tokens is a number (``timestamp,x,y,...``) is a header.  A UTF-8 BOM and CRLF ends are accepted.
+    tokens is a number (``timestamp,x,y,...``) is a header when it is the first such line.  A UTF-8 BOM and CRLF ends are accepted.
     """
     text = read_text(path)
     if "\x00" in text:
         raise DataError(path, "is not a text trajectory file (holds NUL bytes)")
     headers, rows, lines = [], [], []
     delimiter = None
+    first = True
     for lineno, raw in enumerate(text.splitlines(), start=1):
         line = raw.strip()
         if not line:
@@ -64,6 +65,7 @@ def _load_table(path: Path):
             if not rows:
                 headers.append(line.lstrip("#% ").strip())
             continue
+        maybe_header, first = first, False
         if not rows and delimiter is None:
             delimiter = "," if "," in line else None
         if delimiter is None and ";" in line:
@@ -73,7 +75,7 @@ def _load_table(path: Path):
         parts = [p.strip() for p in parts]
         while parts and parts[-1] == "":  # VINS-Fusion's trailing comma
             parts.pop()
-        if not rows and _looks_like_header(parts):
+        if maybe_header and _looks_like_header(parts):
             headers.append(line)
             continue
         rows.append(parts)
@@ -88,14 +90,20 @@ def _load_table(path: Path):
 
 
 def _looks_like_header(parts) -> bool:
-    """A header names columns: none of its tokens is a number."""
-    for part in parts:
-        try:
-            float(part)
-            return False
-        except ValueError:
-            pass
-    return True
+    """A header names columns: none of its tokens is, or starts like, a number (``1.5;2;3`` is a
+    data row with the wrong delimiter, not a header)."""
+    return not any(_NUMBER_START.match(part) or _is_number(part) for part in parts)
+
+
+_NUMBER_START = re.compile(r"^[+-]?\.?\d")
+
+
+def _is_number(token: str) -> bool:
+    try:
+        float(token)
+        return True
+    except ValueError:
+        return False
 
 
 def _to_float(tokens: np.ndarray, path: Path, lines: np.ndarray, columns=None) -> np.ndarray:
