@@ -214,7 +214,9 @@ def _parse(path: Path):
     if k == 13:
         # whitespace: kitti-odom-eval's layout (bad rows are then reported by validation); a comma file
         # is KITTI with index only when its numbers are rotation blocks (else a 13-column csv).
-        if (delimiter is None and np.all(np.char.isdigit(tok[:, 0]))) or (delimiter == "," and _is_kitti_idx(tok)):
+        # (a whitespace file whose first column is mostly frame indices is KITTI with index: a bad
+        # index is then reported as such, at its line)
+        if (delimiter is None and np.mean(np.char.isdigit(tok[:, 0])) > 0.5) or (delimiter == "," and _is_kitti_idx(tok)):
             return "kitti-idx", headers, tok, lines, delimiter
     if k >= 8:
         if delimiter == ",":
