@@ -61,7 +61,7 @@ def _load_table(path: Path):
         line = raw.strip()
         if not line:
             continue
-        if line.startswith("#") or line.startswith("%"):
+        if line.startswith(("#", "%")):
             if not rows:
                 headers.append(line.lstrip("#% ").strip())
             continue
@@ -211,13 +211,12 @@ def _parse(path: Path):
     k = tok.shape[1]
     if k == 12:
         return "kitti", headers, tok, lines, delimiter
-    if k == 13:
-        # whitespace: kitti-odom-eval's layout (bad rows are then reported by validation); a comma file
-        # is KITTI with index only when its numbers are rotation blocks (else a 13-column csv).
-        # (a whitespace file whose first column is mostly frame indices is KITTI with index: a bad
-        # index is then reported as such, at its line)
-        if (delimiter is None and np.mean(np.char.isdigit(tok[:, 0])) > 0.5) or (delimiter == "," and _is_kitti_idx(tok)):
-            return "kitti-idx", headers, tok, lines, delimiter
+    # 13 columns, whitespace: kitti-odom-eval's layout when the first column is mostly frame indices
+    # (a bad index or row is then reported as such, at its line); a comma file is KITTI with index
+    # only when its numbers are rotation blocks (else a 13-column csv).
+    if k == 13 and ((delimiter is None and np.mean(np.char.isdigit(tok[:, 0])) > 0.5)
+                    or (delimiter == "," and _is_kitti_idx(tok))):
+        return "kitti-idx", headers, tok, lines, delimiter
     if k >= 8:
         if delimiter == ",":
             return "euroc", headers, tok, lines, delimiter

@@ -11,14 +11,19 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from fuzz_support import FUZZ, check_error, count_lines
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from fuzz_support import FUZZ, check_error, count_lines
 from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
 from gevi_cli.datasets.euroc import camera_from_sensor_yaml
-from gevi_cli.datasets.kalibr import read_camchain, read_imu_noise, write_camchain, write_imu_yaml
+from gevi_cli.datasets.kalibr import (
+    read_camchain,
+    read_imu_noise,
+    write_camchain,
+    write_imu_yaml,
+)
 from gevi_cli.errors import GeviError
 
 BENIGN = ("none", "bom", "crlf", "comments", "yaml-directive")
@@ -89,7 +94,7 @@ def _run(read, path: Path, raw: bytes, expect: dict, same):
 def _numbers_under(text: str, keys: tuple[str, ...]) -> list[tuple[int, int]]:
     """Spans of the numbers that belong to the given keys (a key's value runs to the next key)."""
     spans = []
-    starts = [(m.start(), m.group(1)) for m in re.finditer(r"^\s*([A-Za-z_]\w*):", text, flags=re.M)]
+    starts = [(m.start(), m.group(1)) for m in re.finditer(r"^\s*([A-Za-z_]\w*):", text, flags=re.MULTILINE)]
     for i, (start, key) in enumerate(starts):
         if key not in keys:
             continue

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from fuzz_support import FUZZ, check_error, count_lines, trajectories
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fuzz_support import FUZZ, check_error, count_lines, trajectories
 from gevi_cli.errors import DataError, GeviError
 from gevi_cli.trajectory import Trajectory, read_trajectory, write_trajectory
 from gevi_cli.trajectory.formats import format_header, format_rows
