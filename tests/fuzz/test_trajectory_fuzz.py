@@ -22,7 +22,7 @@ from gevi_cli.trajectory.formats import format_header, format_rows
 
 FORMATS = ("tum", "euroc", "kitti", "kitti-idx")
 BENIGN = ("none", "bom", "crlf", "bom+crlf", "whitespace", "blank-lines")
-MUTATIONS = BENIGN + ("truncate", "nonfinite", "text-token", "glitch", "duplicate", "swap-rows", "swap-columns",
+MUTATIONS = BENIGN + ("truncate", "nonfinite", "text-token", "glitch", "absurd-rotation", "duplicate", "swap-rows", "swap-columns",
                       "drop-column", "delimiter", "empty", "header-only", "garbage")
 
 
@@ -114,6 +114,15 @@ def _mutate(data, case: Case, traj: Trajectory, kind: str):
             expected[r, axis] = value
             return case.text().encode(), {"positions": expected}
         return case.text().encode(), {"error_line": case.line_of(r), "message": "not plausible"}
+    if kind == "absurd-rotation":
+        # a quaternion component (or rotation entry) 20..1e6 off: a corrupt row, not a rounding error
+        r = data.draw(st.integers(0, n - 1))
+        c = data.draw(st.sampled_from({"tum": [4, 5, 6, 7], "euroc": [4, 5, 6, 7], "kitti": [0, 1, 2, 4, 5, 6, 8, 9, 10],
+                                       "kitti-idx": [1, 2, 3, 5, 6, 7, 9, 10, 11]}[case.fmt]))
+        off = data.draw(st.sampled_from([20.0, 1e3, 1e6])) * data.draw(st.sampled_from([1, -1]))
+        case.rows[r][c] = repr(float(case.rows[r][c]) + off)
+        return case.text().encode(), {"error_line": case.line_of(r),
+                                      "message": "quaternion" if case.fmt in ("tum", "euroc") else "rotation block"}
     if kind == "duplicate":
         r = data.draw(st.integers(0, n - 1))
         case.rows.insert(r + 1, list(case.rows[r]))
