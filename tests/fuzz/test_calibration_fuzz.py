@@ -105,7 +105,7 @@ def _numbers_under(text: str, keys: tuple[str, ...]) -> list[tuple[int, int]]:
 
 
 # ------------------------------------------------------------------------------- Kalibr camchain
-@settings(FUZZ, max_examples=250)
+@settings(FUZZ, max_examples=180)
 @given(seed=st.integers(0, 2**32 - 1), model=st.sampled_from(["radtan", "equidistant", "none"]),
        kind=st.sampled_from(KINDS), data=st.data())
 def test_kalibr_camchain(seed, model, kind, data):
@@ -134,7 +134,7 @@ def test_kalibr_camchain(seed, model, kind, data):
 
 
 # ------------------------------------------------------------------------------- Kalibr imu.yaml
-@settings(FUZZ, max_examples=250)
+@settings(FUZZ, max_examples=180)
 @given(noise=st.lists(st.floats(1e-7, 1.0), min_size=4, max_size=4), kind=st.sampled_from(KINDS), data=st.data())
 def test_kalibr_imu_yaml(noise, kind, data):
     names = ("gyro_noise_density", "gyro_random_walk", "acc_noise_density", "acc_random_walk")
@@ -179,7 +179,7 @@ distortion_coefficients: [{k1}, {k2}, {p1}, {p2}]
 """
 
 
-@settings(FUZZ, max_examples=250)
+@settings(FUZZ, max_examples=180)
 @given(seed=st.integers(0, 2**32 - 1), kind=st.sampled_from(KINDS), data=st.data())
 def test_euroc_sensor_yaml(seed, kind, data):
     rng = np.random.default_rng(seed)

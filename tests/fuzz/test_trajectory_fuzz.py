@@ -211,7 +211,7 @@ def _check(path: Path, raw: bytes, traj: Trajectory, fmt: str, expect: dict) -> 
 
 
 @pytest.mark.parametrize("fmt", FORMATS)
-@settings(FUZZ, max_examples=200)
+@settings(FUZZ, max_examples=150)
 @given(traj=trajectories(), kind=st.sampled_from(MUTATIONS), data=st.data())
 def test_mutated_trajectory_files(fmt, traj, kind, data):
     case = Case(traj, fmt)
