@@ -13,14 +13,15 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import pandas as pd
 
 from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
+from gevi_cli.datasets.kalibr import pose_matrix, yaml_real, yaml_whole
 from gevi_cli.datasets.registry import register
 from gevi_cli.datasets.sequence import ImuData, Sequence, StereoFrame, pair_stereo
-from gevi_cli.datasets.yamlio import load_yaml, matrix, require
+from gevi_cli.datasets.yamlio import load_yaml, require
 from gevi_cli.errors import DataError, GeviError, LayoutError
 from gevi_cli.trajectory import Trajectory, read_trajectory
+from gevi_cli.trajectory.formats import _is_number, _looks_like_header, read_text
 
 _DISTORTION_NAMES = {
     "radial-tangential": "radtan", "radtan": "radtan", "plumb_bob": "radtan",
@@ -45,36 +46,95 @@ def camera_from_sensor_yaml(path: Path) -> PinholeCamera:
     if model != "pinhole":
         raise DataError(path, f"camera_model '{model}' is not supported (only pinhole)")
     try:
-        fu, fv, cu, cv = (float(v) for v in require(data, "intrinsics", path))
-        width, height = (int(v) for v in require(data, "resolution", path))
+        fu, fv, cu, cv = (yaml_real(v) for v in require(data, "intrinsics", path))
+        width, height = (yaml_whole(v) for v in require(data, "resolution", path))
     except (TypeError, ValueError):
         raise DataError(path, "'intrinsics' must be [fu, fv, cu, cv] and 'resolution' [width, height]") from None
+    if not all(np.isfinite(v) for v in (fu, fv, cu, cv)) or fu <= 0 or fv <= 0:
+        raise DataError(path, "'intrinsics' must be finite with fu, fv > 0")
+    if width <= 0 or height <= 0:
+        raise DataError(path, f"'resolution' must be positive, got [{width}, {height}]")
     name = str(data.get("distortion_model", "none")).lower()
     if name not in _DISTORTION_NAMES:
         raise DataError(path, f"distortion_model '{name}' is not supported (radial-tangential, equidistant, none)")
-    coeffs = tuple(float(c) for c in data.get("distortion_coefficients", []) or [])
+    try:
+        coeffs = tuple(yaml_real(c) for c in (data.get("distortion_coefficients", []) or []))
+    except (TypeError, ValueError):
+        raise DataError(path, "'distortion_coefficients' must be a list of numbers") from None
+    if not all(np.isfinite(c) for c in coeffs):
+        raise DataError(path, "'distortion_coefficients' must be finite")
     dist = _DISTORTION_NAMES[name]
     if dist != "none" and len(coeffs) != 4:
         raise DataError(path, f"{name} distortion needs 4 coefficients, got {len(coeffs)}")
-    T_B_C = matrix(require(data, "T_BS", path), path, "T_BS")
+    T_B_C = pose_matrix(require(data, "T_BS", path), path, "T_BS")
     return PinholeCamera(width, height, fu, fv, cu, cv, dist, coeffs, T_B_C)
 
 
+def read_csv_rows(path: Path, what: str) -> list[tuple[int, list[str]]]:
+    """``(line number, comma-separated tokens)`` of every data row of an EuRoC ``data.csv``.
+
+    Skips blank lines and ``#`` comments (EuRoC's ``#timestamp [ns],...`` header) and a first line
+    naming the columns without ``#``; takes a UTF-8 BOM, CRLF ends and spaces around commas.
+    """
+    text = read_text(path)
+    rows: list[tuple[int, list[str]]] = []
+    first = True
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        line = raw.strip()
+        if not line or line.startswith("#"):
+            continue
+        tokens = [t.strip() for t in line.split(",")]
+        if first and _looks_like_header(tokens):
+            first = False
+            continue  # an unmarked header (timestamp,filename)
+        first = False
+        rows.append((lineno, tokens))
+    if not rows:
+        raise DataError(path, f"lists no {what}" + (" (the file is empty)" if not text.strip() else ""))
+    return rows
+
+
+def _stamp_ns(token: str, path: Path, lineno: int) -> int:
+    """A whole-nanosecond stamp (EuRoC's unit), refused with its line otherwise."""
+    if not token.isdigit() or not token.isascii() or int(token) > _MAX_NS:
+        raise DataError(f"{path}:{lineno}", f"timestamp {token[:30]!r} is not a whole number of nanoseconds "
+                                            "(EuRoC stamps are ns integers)")
+    return int(token)
+
+
+def _increasing(stamps: np.ndarray, path: Path, lines: list[int]) -> None:
+    bad = np.diff(stamps) <= 0
+    if bad.any():
+        r = int(np.argmax(bad)) + 1
+        what = "repeats" if stamps[r] == stamps[r - 1] else "is before"
+        raise DataError(f"{path}:{lines[r]}", f"timestamp {stamps[r]} {what} the previous row's ({stamps[r - 1]}, "
+                                              f"line {lines[r - 1]}); rows must be in time order, one per stamp")
+
+
+#: int64 nanoseconds end at 9.22e18.
+_MAX_NS = 9_000_000_000_000_000_000
+
+
 def read_image_list(folder: Path) -> tuple[np.ndarray, np.ndarray, int]:
-    """(stamps_ns, file paths, rows without a file) from ``<cam>/data.csv`` and ``<cam>/data/``."""
+    """(stamps_ns, file paths, rows without a file) from ``<cam>/data.csv`` and ``<cam>/data/``.
+
+    Rows are ``<timestamp ns>,<filename>``; stamps must strictly increase (an unsorted or repeated
+    row is refused with its line, not reordered).
+    """
     csv = folder / "data.csv"
     if not csv.is_file():
         raise LayoutError(folder, "missing data.csv (expected '#timestamp [ns],filename' rows)")
-    try:
-        table = pd.read_csv(csv, header=None, comment="#", names=["t", "file"], dtype={"t": np.int64, "file": str},
-                            skipinitialspace=True)
-    except (ValueError, pd.errors.ParserError) as err:
-        raise DataError(csv, f"cannot parse rows as '<timestamp ns>,<filename>' ({err})") from None
-    if table.empty:
-        raise DataError(csv, "lists no images")
-    order = np.argsort(table["t"].to_numpy(), kind="stable")
-    stamps = table["t"].to_numpy()[order]
-    files = table["file"].to_numpy().astype(str)[order]
+    rows = read_csv_rows(csv, "images")
+    stamps, files, lines = [], [], []
+    for lineno, tokens in rows:
+        if len(tokens) != 2 or not tokens[1]:
+            raise DataError(f"{csv}:{lineno}", f"expected '<timestamp ns>,<filename>', found {len(tokens)} column(s)")
+        stamps.append(_stamp_ns(tokens[0], csv, lineno))
+        files.append(tokens[1])
+        lines.append(lineno)
+    stamps = np.array(stamps, dtype=np.int64)
+    _increasing(stamps, csv, lines)
+    files = np.array(files, dtype=str)
     data_dir = folder / "data"
     present = set(os.listdir(data_dir)) if data_dir.is_dir() else set()
     exists = np.fromiter((f in present for f in files), dtype=bool, count=len(files))
@@ -83,35 +143,56 @@ def read_image_list(folder: Path) -> tuple[np.ndarray, np.ndarray, int]:
 
 
 def read_imu(folder: Path) -> ImuData:
-    """``imu0/data.csv`` (ns, gyro xyz rad/s, acc xyz m/s^2) and the noise model of ``sensor.yaml``."""
+    """``imu0/data.csv`` (ns, gyro xyz rad/s, acc xyz m/s^2) and the noise model of ``sensor.yaml``.
+
+    Every row has the first row's column count (at least 7; later columns are ignored), finite
+    values, and a stamp after the previous row's; a row that does not is refused with its line.
+    """
     csv = folder / "data.csv"
-    try:
-        table = pd.read_csv(csv, header=None, comment="#", dtype=np.float64, skipinitialspace=True)
-        stamps = pd.read_csv(csv, header=None, comment="#", usecols=[0], dtype=np.int64).to_numpy()[:, 0]
-    except FileNotFoundError:
-        raise LayoutError(folder, "missing data.csv") from None
-    except (ValueError, pd.errors.ParserError) as err:
-        raise DataError(csv, f"cannot parse IMU rows ({err})") from None
-    if table.shape[1] < 7:
-        raise DataError(csv, f"has {table.shape[1]} columns; expected 7 (timestamp, gyro xyz, acc xyz)")
-    values = table.to_numpy()[:, 1:7]
-    bad = ~np.isfinite(values).all(axis=1)
-    if bad.any():
-        raise DataError(f"{csv}", f"data row {int(np.argmax(bad)) + 1} contains a non-finite value")
-    if (np.diff(stamps) <= 0).any():
-        raise DataError(csv, f"timestamps not increasing at data row {int(np.argmax(np.diff(stamps) <= 0)) + 2}")
+    if not csv.is_file():
+        raise LayoutError(folder, "missing data.csv")
+    rows = read_csv_rows(csv, "IMU rows")
+    width = len(rows[0][1])
+    if width < 7:
+        raise DataError(f"{csv}:{rows[0][0]}", f"has {width} columns; expected 7 (timestamp, gyro xyz, acc xyz)")
+    stamps = np.empty(len(rows), dtype=np.int64)
+    values = np.empty((len(rows), 6))
+    lines = []
+    for i, (lineno, tokens) in enumerate(rows):
+        if len(tokens) != width:
+            raise DataError(f"{csv}:{lineno}", f"has {len(tokens)} columns, expected {width} like the first row")
+        stamps[i] = _stamp_ns(tokens[0], csv, lineno)
+        try:
+            values[i] = [float(t) for t in tokens[1:7]]
+        except ValueError:
+            bad = next(c for c, t in enumerate(tokens[1:7], start=2) if not _is_number(t))
+            raise DataError(f"{csv}:{lineno}", f"column {bad} is not a number: {tokens[bad - 1][:30]!r}") from None
+        if not np.isfinite(values[i]).all():
+            raise DataError(f"{csv}:{lineno}", "contains a non-finite value (nan or inf)")
+        lines.append(lineno)
+    _increasing(stamps, csv, lines)
     noise = {}
     yaml_path = folder / "sensor.yaml"
     if yaml_path.is_file():
         data = load_yaml(yaml_path)
-        T_BS = matrix(data["T_BS"], yaml_path, "T_BS") if "T_BS" in data else np.eye(4)
+        T_BS = pose_matrix(data["T_BS"], yaml_path, "T_BS") if "T_BS" in data else np.eye(4)
         if not np.allclose(T_BS, np.eye(4), atol=1e-9):
             raise DataError(yaml_path, "imu0 T_BS is not identity; gevi defines the body frame as the IMU frame")
         for key, field in (("gyroscope_noise_density", "gyro_noise_density"), ("gyroscope_random_walk", "gyro_random_walk"),
                            ("accelerometer_noise_density", "acc_noise_density"), ("accelerometer_random_walk", "acc_random_walk")):
             if key in data:
-                noise[field] = float(data[key])
+                noise[field] = _noise_value(data[key], yaml_path, key)
     return ImuData(stamps, values[:, 0:3].copy(), values[:, 3:6].copy(), **noise)
+
+
+def _noise_value(value, path: Path, key: str) -> float:
+    try:
+        value = yaml_real(value)
+    except (TypeError, ValueError):
+        raise DataError(path, f"'{key}' is not a number") from None
+    if not np.isfinite(value) or value < 0:
+        raise DataError(path, f"'{key}' must be a finite non-negative number")
+    return value
 
 
 @register("euroc")

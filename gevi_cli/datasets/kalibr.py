@@ -39,7 +39,7 @@ import numpy as np
 import yaml
 
 from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
-from gevi_cli.datasets.yamlio import load_yaml, matrix, require
+from gevi_cli.datasets.yamlio import load_yaml, matrix
 from gevi_cli.errors import DataError
 from gevi_cli.geometry import invert_pose
 
@@ -87,14 +87,16 @@ def read_camchain(path: Path) -> Camchain:
     for name in ("cam0", "cam1"):
         block = data[name]
         cams[name] = _intrinsics(block, path, name)
-        T_cam_imu[name] = matrix(block["T_cam_imu"], path, f"{name}.T_cam_imu") if "T_cam_imu" in block else None
+        T_cam_imu[name] = pose_matrix(block["T_cam_imu"], path, f"{name}.T_cam_imu") if "T_cam_imu" in block else None
         shift = block.get("timeshift_cam_imu", 0.0)
         try:
-            shift = float(shift)
+            shift = yaml_real(shift)
         except (TypeError, ValueError):
             raise DataError(path, f"'{name}.timeshift_cam_imu' is not a number") from None
+        if not math.isfinite(shift):
+            raise DataError(path, f"'{name}.timeshift_cam_imu' is not finite")
         shifts[name] = shift
-    T_C1_C0 = matrix(data["cam1"]["T_cn_cnm1"], path, "cam1.T_cn_cnm1") if "T_cn_cnm1" in data["cam1"] else None
+    T_C1_C0 = pose_matrix(data["cam1"]["T_cn_cnm1"], path, "cam1.T_cn_cnm1") if "T_cn_cnm1" in data["cam1"] else None
 
     if T_cam_imu["cam0"] is not None:
         T_B_C0 = invert_pose(T_cam_imu["cam0"])
@@ -132,16 +134,18 @@ def _intrinsics(block: dict, path: Path, name: str) -> PinholeCamera:
     if model != "pinhole":
         raise DataError(path, f"{name}.camera_model '{model}' is not supported (only pinhole)")
     try:
-        fu, fv, cu, cv = (float(v) for v in require(block, "intrinsics", f"{path}: {name}"))
-        width, height = (int(v) for v in require(block, "resolution", f"{path}: {name}"))
+        fu, fv, cu, cv = (yaml_real(v) for v in _require(block, "intrinsics", path, name))
+        width, height = (yaml_whole(v) for v in _require(block, "resolution", path, name))
     except (TypeError, ValueError):
         raise DataError(path, f"{name}: 'intrinsics' must be [fu, fv, cu, cv] and 'resolution' [width, height]") from None
+    if width <= 0 or height <= 0:
+        raise DataError(path, f"{name}: 'resolution' must be positive, got [{width}, {height}]")
     dist_name = str(block.get("distortion_model", "none")).lower()
     if dist_name not in _DISTORTION:
         raise DataError(path, f"{name}.distortion_model '{dist_name}' is not supported (radtan, equidistant, none)")
     dist = _DISTORTION[dist_name]
     try:
-        coeffs = tuple(float(c) for c in (block.get("distortion_coeffs") or []))
+        coeffs = tuple(yaml_real(c) for c in (block.get("distortion_coeffs") or []))
     except (TypeError, ValueError):
         raise DataError(path, f"{name}.distortion_coeffs must be a list of numbers") from None
     if dist == "none":
@@ -153,6 +157,50 @@ def _intrinsics(block: dict, path: Path, name: str) -> PinholeCamera:
     if not all(math.isfinite(v) for v in (fu, fv, cu, cv, *coeffs)) or fu <= 0 or fv <= 0:
         raise DataError(path, f"{name}: intrinsics must be finite with fu, fv > 0")
     return PinholeCamera(width, height, fu, fv, cu, cv, dist, coeffs)
+
+
+def _require(block: dict, key: str, path: Path, name: str):
+    """``block[key]``; a missing key is a DataError at the file (``where`` is the file alone)."""
+    if key not in block:
+        raise DataError(path, f"{name}: missing key '{key}'")
+    return block[key]
+
+
+def yaml_real(value) -> float:
+    """A YAML number: int, float or a string of one (PyYAML reads ``1e-3``, without a dot, as a
+    string); not a bool (``true`` is not 1.0), a list or a mapping."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise TypeError(f"not a number: {value!r}")
+    return float(value)
+
+
+def yaml_whole(value) -> int:
+    """A YAML whole number (752 or 752.0; 752.5 is refused, not truncated)."""
+    value = yaml_real(value)
+    if not math.isfinite(value) or value != int(value):
+        raise ValueError(f"not a whole number: {value!r}")
+    return int(value)
+
+
+def pose_matrix(value, path: Path, key: str) -> np.ndarray:
+    """A 4x4 rigid transform from a YAML nested list or OpenCV ``{rows, cols, data}``.
+
+    On top of :func:`gevi_cli.datasets.yamlio.matrix` (shape, finite, rotation block): every entry
+    is a number (a YAML ``true`` would otherwise read as 1.0) and the last row is ``0 0 0 1``
+    (anything else is not a rigid transform, and would be silently ignored by the inversion).
+    """
+    entries = value.get("data") if isinstance(value, dict) else value
+    stack = [entries]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, (list, tuple)):
+            stack.extend(item)
+        elif isinstance(item, bool) or (item is not None and not isinstance(item, (int, float, str))):
+            raise DataError(path, f"'{key}' holds {item!r}, not a number")
+    M = matrix(value, path, key)
+    if not np.allclose(M[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+        raise DataError(path, f"'{key}' is not a rigid transform: its last row is {M[3].tolist()}, not [0, 0, 0, 1]")
+    return M
 
 
 def _with_pose(cam: PinholeCamera, T_B_C: np.ndarray) -> PinholeCamera:
@@ -170,7 +218,7 @@ def read_imu_noise(path: Path) -> dict[str, float]:
     for key, name in IMU_NOISE_KEYS.items():
         if key in data:
             try:
-                value = float(data[key])
+                value = yaml_real(data[key])
             except (TypeError, ValueError):
                 raise DataError(path, f"'{key}' is not a number") from None
             if not math.isfinite(value) or value < 0:

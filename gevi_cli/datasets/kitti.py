@@ -8,6 +8,7 @@ next to it).  Option ``cameras="gray"`` (default when image_0 exists) or ``"colo
 """
 from __future__ import annotations
 
+import re
 from functools import cached_property
 from pathlib import Path
 
@@ -19,29 +20,77 @@ from gevi_cli.datasets.registry import register
 from gevi_cli.datasets.sequence import Sequence, StereoFrame
 from gevi_cli.errors import DataError, GeviError, LayoutError
 from gevi_cli.trajectory import Trajectory, read_trajectory
+from gevi_cli.trajectory.formats import read_text
 from gevi_cli.trajectory.stamps import decimal_strings_to_ns
 
 _CAMERAS = {"gray": ("image_0", "image_1", "P0", "P1"), "color": ("image_2", "image_3", "P2", "P3")}
 
 
 def read_calib(path: Path) -> dict[str, np.ndarray]:
-    """The ``P0..P3`` (3x4) matrices of a KITTI ``calib.txt``."""
+    """The ``P0..P3`` (3x4) matrices of a KITTI ``calib.txt`` (``Pi: 12 numbers`` per line).
+
+    Other ``key: values`` lines (``Tr:``, ``calib_time:``) are ignored; a ``P`` row with a
+    non-number, a non-finite value, other than 12 numbers, or given twice is refused with its line.
+    """
     if not path.is_file():
         raise LayoutError(path.parent, "missing calib.txt")
     out = {}
-    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
-        key, _, rest = line.partition(":")
-        if not rest.strip():
+    for lineno, line in enumerate(read_text(path).splitlines(), start=1):
+        if not line.strip():
+            continue
+        key, colon, rest = line.partition(":")
+        key = key.strip()
+        if not colon or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", key):
+            raise DataError(f"{path}:{lineno}", f"is not a 'key: values' line (KITTI calib.txt rows are "
+                                                f"'P0: 12 numbers'): {line.strip()[:40]!r}")
+        if key not in _P_KEYS:
             continue
         try:
             values = np.array(rest.split(), dtype=np.float64)
         except ValueError:
             raise DataError(f"{path}:{lineno}", f"'{key}' holds a non-number") from None
-        if key.strip() in ("P0", "P1", "P2", "P3"):
-            if values.size != 12:
-                raise DataError(f"{path}:{lineno}", f"'{key}' has {values.size} numbers, expected 12")
-            out[key.strip()] = values.reshape(3, 4)
+        if values.size != 12:
+            raise DataError(f"{path}:{lineno}", f"'{key}' has {values.size} numbers, expected 12")
+        if not np.isfinite(values).all():
+            raise DataError(f"{path}:{lineno}", f"'{key}' holds a non-finite value (nan or inf)")
+        if key in out:
+            raise DataError(f"{path}:{lineno}", f"'{key}' is given twice")
+        out[key] = values.reshape(3, 4)
     return out
+
+
+_P_KEYS = ("P0", "P1", "P2", "P3")
+
+
+def read_times(path: Path) -> np.ndarray:
+    """The stamps of ``times.txt`` (one time in seconds per line) as exact int64 ns.
+
+    Blank lines are skipped; a line that is not one finite number, or a time not after the
+    previous line's, is refused with its line.
+    """
+    if not path.is_file():
+        raise LayoutError(path.parent, "missing times.txt")
+    stamps, lines = [], []
+    for lineno, line in enumerate(read_text(path).splitlines(), start=1):
+        tokens = line.split()
+        if not tokens:
+            continue
+        if len(tokens) != 1:
+            raise DataError(f"{path}:{lineno}", f"holds {len(tokens)} values; expected one time in seconds per line")
+        try:
+            stamps.append(int(decimal_strings_to_ns(tokens, 1_000_000_000)[0]))
+        except ValueError:
+            raise DataError(f"{path}:{lineno}", f"{tokens[0][:30]!r} is not a finite time in seconds") from None
+        lines.append(lineno)
+    if not stamps:
+        raise DataError(path, "lists no times (expected one time in seconds per frame)")
+    stamps = np.array(stamps, dtype=np.int64)
+    bad = np.diff(stamps) <= 0
+    if bad.any():
+        r = int(np.argmax(bad)) + 1
+        raise DataError(f"{path}:{lines[r]}", f"time {stamps[r] * 1e-9:.9g} s is not after the previous line's "
+                                              f"({stamps[r - 1] * 1e-9:.9g} s); times must increase, one per frame")
+    return stamps
 
 
 def _camera_from_P(P: np.ndarray, P_ref: np.ndarray, width: int, height: int) -> PinholeCamera:
@@ -86,14 +135,7 @@ class KittiSequence(Sequence):
         for folder in (left_dir, right_dir):
             if not (self.path / folder).is_dir():
                 raise LayoutError(self.path, f"missing {folder}/ for the {cameras} stereo pair")
-        times = self.path / "times.txt"
-        tokens = np.array(times.read_text().split(), dtype=str)
-        try:
-            self._stamps = decimal_strings_to_ns(tokens, 1_000_000_000)
-        except ValueError:
-            raise DataError(times, "holds a non-number (expected one time in seconds per line)") from None
-        if len(self._stamps) == 0 or (np.diff(self._stamps) <= 0).any():
-            raise DataError(times, "times must be increasing, one per frame")
+        self._stamps = read_times(self.path / "times.txt")
         names = [f"{i:06d}.png" for i in range(len(self._stamps))]
         self._left = [str(self.path / left_dir / n) for n in names]
         self._right = [str(self.path / right_dir / n) for n in names]

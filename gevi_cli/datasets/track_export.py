@@ -37,6 +37,7 @@ from gevi_cli.datasets.kitti import read_calib
 from gevi_cli.errors import DataError, GeviError, LayoutError
 from gevi_cli.frontend.types import FeatureObs, RectifiedStereo, StereoObs
 from gevi_cli.trajectory import Trajectory, read_trajectory
+from gevi_cli.trajectory.formats import read_text
 from gevi_cli.trajectory.trajectory import KITTI_NOMINAL_PERIOD_NS
 
 TRACKS_GLOB = "ov2slam_pnp_data_seq*.txt"
@@ -78,10 +79,7 @@ def detect(path: str | Path) -> bool:
 # ----------------------------------------------------------------------------------------- parsing
 def _read_rows(path: Path, lines_per_block: int, what: tuple[str, ...]) -> list[np.ndarray]:
     """Every line of ``path`` as a float64 array (blank trailing lines dropped), count checked."""
-    try:
-        text = path.read_text()
-    except UnicodeDecodeError:
-        raise DataError(path, "is not a text file") from None
+    text = read_text(path)  # UTF-8 (a BOM dropped); binary content is a DataError naming the file
     lines = text.splitlines()
     while lines and not lines[-1].strip():
         lines.pop()
@@ -97,7 +95,7 @@ def _read_rows(path: Path, lines_per_block: int, what: tuple[str, ...]) -> list[
         try:
             rows.append(np.array(tokens, dtype=np.float64))
         except ValueError:
-            col, bad = next((i, t) for i, t in enumerate(tokens, start=1) if not _is_float(t))
+            col, bad = next(((i, t) for i, t in enumerate(tokens, start=1) if not _is_float(t)), (1, tokens[0]))
             raise DataError(f"{path}:{lineno}",
                             f"value {col} {bad[:20]!r} is not a number (line {(lineno - 1) % lines_per_block + 1} of "
                             f"its block: {what[(lineno - 1) % lines_per_block]})") from None
@@ -130,8 +128,8 @@ def _finite(path: Path, first_line: int, block: list[np.ndarray], lines: tuple[i
 
 
 def _ids(path: Path, lineno: int, values: np.ndarray) -> np.ndarray:
-    if not np.isfinite(values).all() or (np.round(values) != values).any():
-        raise DataError(f"{path}:{lineno}", "point ids must be whole numbers")
+    if not np.isfinite(values).all() or (np.round(values) != values).any() or (np.abs(values) > 2.0**53).any():
+        raise DataError(f"{path}:{lineno}", "point ids must be whole numbers (below 2^53)")
     ids = values.astype(np.int64)
     if len(np.unique(ids)) != len(ids):
         raise DataError(f"{path}:{lineno}", "lists a point id twice (ids must be unique within a frame)")
@@ -157,7 +155,7 @@ def _read_stereo(path: Path, n_frames: int) -> dict[int, StereoObs]:
     for b in range(0, len(rows), 6):
         block, first = rows[b:b + 6], b + 1
         head = block[0]
-        if head.size != 1 or not np.isfinite(head[0]) or head[0] != int(head[0]):
+        if head.size != 1 or not np.isfinite(head[0]) or head[0] != np.round(head[0]):
             raise DataError(f"{path}:{first}", f"the first line of a keyframe block must hold one frame index, "
                                                f"found {head.size} value(s)")
         kf = int(head[0])

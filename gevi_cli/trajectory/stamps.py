@@ -8,17 +8,28 @@ from __future__ import annotations
 
 import numpy as np
 
+#: int64 nanoseconds reach 9.22e18 (year 2262); stamps beyond this are refused, not wrapped around.
+_MAX_ABS_NS = 9.0e18
+
 
 def decimal_strings_to_ns(tokens, unit_scale_ns: int) -> np.ndarray:
     """Convert decimal strings in a unit worth ``unit_scale_ns`` ns (1e9 for seconds, 1 for ns).
 
-    Returns int64 ns; rounds to the nearest nanosecond.  Raises ``ValueError`` on non-numbers.
+    Returns int64 ns; rounds to the nearest nanosecond.  Raises ``ValueError`` on non-numbers,
+    non-finite values and stamps outside int64 nanoseconds (never a wrapped-around number).
     """
-    tokens = np.asarray(tokens, dtype=str)
+    tokens = np.asarray(tokens, dtype=str).reshape(-1)
     out = np.empty(len(tokens), dtype=np.int64)
-    sci = np.char.find(np.char.lower(tokens), "e") >= 0
+    if len(tokens) == 0:
+        return out
+    with np.errstate(all="ignore"):
+        approx = tokens.astype(np.float64) * unit_scale_ns  # ValueError on a non-number
+    if not np.isfinite(approx).all() or (np.abs(approx) > _MAX_ABS_NS).any():
+        raise ValueError("timestamp is not finite or outside the int64 nanosecond range")
+    lowered = np.char.lower(tokens)
+    sci = (np.char.find(lowered, "e") >= 0) | (np.char.find(lowered, "_") >= 0)
     if sci.any():
-        out[sci] = np.rint(tokens[sci].astype(np.float64) * unit_scale_ns).astype(np.int64)
+        out[sci] = np.rint(approx[sci]).astype(np.int64)
     plain = ~sci
     if plain.any():
         parts = np.char.partition(tokens[plain], ".")
