@@ -15,10 +15,10 @@ import cv2
 import numpy as np
 
 from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
-from gevi_cli.datasets.kalibr import pose_matrix, yaml_real, yaml_whole
+from gevi_cli.datasets.kalibr import yaml_real, yaml_whole
 from gevi_cli.datasets.registry import register
 from gevi_cli.datasets.sequence import ImuData, Sequence, StereoFrame, pair_stereo
-from gevi_cli.datasets.yamlio import load_yaml, require
+from gevi_cli.datasets.yamlio import load_yaml, matrix, require
 from gevi_cli.errors import DataError, GeviError, LayoutError
 from gevi_cli.trajectory import Trajectory, read_trajectory
 from gevi_cli.trajectory.formats import _is_number, _looks_like_header, read_text
@@ -66,7 +66,7 @@ def camera_from_sensor_yaml(path: Path) -> PinholeCamera:
     dist = _DISTORTION_NAMES[name]
     if dist != "none" and len(coeffs) != 4:
         raise DataError(path, f"{name} distortion needs 4 coefficients, got {len(coeffs)}")
-    T_B_C = pose_matrix(require(data, "T_BS", path), path, "T_BS")
+    T_B_C = matrix(require(data, "T_BS", path), path, "T_BS")
     return PinholeCamera(width, height, fu, fv, cu, cv, dist, coeffs, T_B_C)
 
 
@@ -175,7 +175,7 @@ def read_imu(folder: Path) -> ImuData:
     yaml_path = folder / "sensor.yaml"
     if yaml_path.is_file():
         data = load_yaml(yaml_path)
-        T_BS = pose_matrix(data["T_BS"], yaml_path, "T_BS") if "T_BS" in data else np.eye(4)
+        T_BS = matrix(data["T_BS"], yaml_path, "T_BS") if "T_BS" in data else np.eye(4)
         if not np.allclose(T_BS, np.eye(4), atol=1e-9):
             raise DataError(yaml_path, "imu0 T_BS is not identity; gevi defines the body frame as the IMU frame")
         for key, field in (("gyroscope_noise_density", "gyro_noise_density"), ("gyroscope_random_walk", "gyro_random_walk"),

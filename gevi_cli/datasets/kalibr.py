@@ -87,7 +87,7 @@ def read_camchain(path: Path) -> Camchain:
     for name in ("cam0", "cam1"):
         block = data[name]
         cams[name] = _intrinsics(block, path, name)
-        T_cam_imu[name] = pose_matrix(block["T_cam_imu"], path, f"{name}.T_cam_imu") if "T_cam_imu" in block else None
+        T_cam_imu[name] = matrix(block["T_cam_imu"], path, f"{name}.T_cam_imu") if "T_cam_imu" in block else None
         shift = block.get("timeshift_cam_imu", 0.0)
         try:
             shift = yaml_real(shift)
@@ -96,7 +96,7 @@ def read_camchain(path: Path) -> Camchain:
         if not math.isfinite(shift):
             raise DataError(path, f"'{name}.timeshift_cam_imu' is not finite")
         shifts[name] = shift
-    T_C1_C0 = pose_matrix(data["cam1"]["T_cn_cnm1"], path, "cam1.T_cn_cnm1") if "T_cn_cnm1" in data["cam1"] else None
+    T_C1_C0 = matrix(data["cam1"]["T_cn_cnm1"], path, "cam1.T_cn_cnm1") if "T_cn_cnm1" in data["cam1"] else None
 
     if T_cam_imu["cam0"] is not None:
         T_B_C0 = invert_pose(T_cam_imu["cam0"])
@@ -180,27 +180,6 @@ def yaml_whole(value) -> int:
     if not math.isfinite(value) or value != int(value):
         raise ValueError(f"not a whole number: {value!r}")
     return int(value)
-
-
-def pose_matrix(value, path: Path, key: str) -> np.ndarray:
-    """A 4x4 rigid transform from a YAML nested list or OpenCV ``{rows, cols, data}``.
-
-    On top of :func:`gevi_cli.datasets.yamlio.matrix` (shape, finite, rotation block): every entry
-    is a number (a YAML ``true`` would otherwise read as 1.0) and the last row is ``0 0 0 1``
-    (anything else is not a rigid transform, and would be silently ignored by the inversion).
-    """
-    entries = value.get("data") if isinstance(value, dict) else value
-    stack = [entries]
-    while stack:
-        item = stack.pop()
-        if isinstance(item, (list, tuple)):
-            stack.extend(item)
-        elif isinstance(item, bool) or (item is not None and not isinstance(item, (int, float, str))):
-            raise DataError(path, f"'{key}' holds {item!r}, not a number")
-    M = matrix(value, path, key)
-    if not np.allclose(M[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
-        raise DataError(path, f"'{key}' is not a rigid transform: its last row is {M[3].tolist()}, not [0, 0, 0, 1]")
-    return M
 
 
 def _with_pose(cam: PinholeCamera, T_B_C: np.ndarray) -> PinholeCamera:

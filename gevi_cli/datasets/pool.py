@@ -14,9 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from gevi_cli.datasets.euroc import EurocSequence, find_mav0
-from gevi_cli.datasets.kalibr import pose_matrix
 from gevi_cli.datasets.registry import register
-from gevi_cli.datasets.yamlio import load_yaml
+from gevi_cli.datasets.yamlio import load_yaml, matrix
 from gevi_cli.errors import LayoutError
 from gevi_cli.geometry import invert_pose
 from gevi_cli.trajectory import Trajectory, read_trajectory
@@ -37,7 +36,7 @@ class PoolSequence(EurocSequence):
         yaml_path = self.mav0 / "mocap0" / "sensor.yaml"
         if not yaml_path.is_file():
             raise LayoutError(self.mav0 / "mocap0", "missing sensor.yaml with T_BS (marker to body transform)")
-        return pose_matrix(load_yaml(yaml_path).get("T_BS"), yaml_path, "T_BS")
+        return matrix(load_yaml(yaml_path).get("T_BS"), yaml_path, "T_BS")
 
     @cached_property
     def mocap(self) -> Trajectory:

@@ -18,6 +18,19 @@ class _OpenCVLoader(yaml.SafeLoader):
     output): read as the plain ``{rows, cols, dt, data}`` mapping that :func:`matrix` takes."""
 
 
+def _mapping_without_duplicates(loader, node, deep=False):
+    # PyYAML keeps the last of two equal keys silently: a calibration edited twice must say so
+    seen = {}
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node, deep=True)
+        if key in seen:
+            raise yaml.constructor.ConstructorError(None, None, f"key '{key}' given twice (first on line "
+                                                    f"{seen[key] + 1})", key_node.start_mark)
+        seen[key] = key_node.start_mark.line
+    return yaml.SafeLoader.construct_mapping(loader, node, deep=deep)
+
+
+_OpenCVLoader.add_constructor("tag:yaml.org,2002:map", _mapping_without_duplicates)
 _OpenCVLoader.add_constructor("tag:yaml.org,2002:opencv-matrix", yaml.SafeLoader.construct_mapping)
 _OpenCVLoader.add_constructor("tag:yaml.org,2002:opencv-nd-matrix", yaml.SafeLoader.construct_mapping)
 
@@ -57,7 +70,22 @@ def load_yaml(path: Path, *, empty_ok: bool = False, what: str = "file") -> dict
 
 
 def matrix(value, path: Path, key: str, shape=(4, 4)) -> np.ndarray:
-    """A matrix from ``{rows, cols, data}`` or a nested list."""
+    """A matrix from ``{rows, cols, data}`` (OpenCV) or a nested list.
+
+    Every entry must be a number (a YAML ``true`` would otherwise read as 1.0) and finite; a 4x4 must
+    be a rigid transform: a rotation in its upper-left block and a last row ``0 0 0 1`` (anything else
+    would be silently ignored by the inversion).
+    """
+    entries = value.get("data") if isinstance(value, dict) else value
+    stack = [entries]
+    while stack:
+        item = stack.pop()
+        if isinstance(item, np.ndarray):
+            stack.extend(item.tolist())
+        elif isinstance(item, (list, tuple)):
+            stack.extend(item)
+        elif isinstance(item, bool) or (item is not None and not isinstance(item, (int, float, str))):
+            raise DataError(path, f"'{key}' holds {item!r}, not a number")
     try:
         if isinstance(value, dict):
             M = np.asarray(value["data"], dtype=np.float64).reshape(int(value["rows"]), int(value["cols"]))
@@ -72,6 +100,8 @@ def matrix(value, path: Path, key: str, shape=(4, 4)) -> np.ndarray:
         R = M[:3, :3]
         if np.abs(R @ R.T - np.eye(3)).max() > 1e-3 or np.linalg.det(R) < 0:
             raise DataError(path, f"'{key}' does not hold a rotation in its upper-left 3x3 block")
+        if not np.allclose(M[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+            raise DataError(path, f"'{key}' is not a rigid transform: its last row is {M[3].tolist()}, not [0, 0, 0, 1]")
     return M
 
 

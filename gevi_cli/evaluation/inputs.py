@@ -258,18 +258,16 @@ def load_T_B_C0(path: Path) -> np.ndarray:
         raise GeviError("--T-B-C0", f"{path}: no such file")
     text = path.read_text()
     vals = None
-    if path.suffix.lower() in (".yaml", ".yml"):
-        from gevi_cli.datasets.yamlio import load_yaml
+    from gevi_cli.datasets.yamlio import load_yaml, matrix
 
+    if path.suffix.lower() in (".yaml", ".yml"):
         data = load_yaml(path)  # takes what the dataset readers take (EuRoC's %YAML:1.0 header)
         for key in ("T_B_C0", "T_BS", "T_B_C"):
             if isinstance(data, dict) and key in data:
-                v = data[key]
-                vals = v.get("data") if isinstance(v, dict) else v
+                vals = matrix(data[key], path, key).reshape(-1)
                 break
         if vals is None:
             raise GeviError(path, "expected a key T_B_C0 (or T_BS) holding a 4x4 matrix")
-        vals = np.asarray(vals, dtype=np.float64).reshape(-1)
     else:
         try:
             vals = np.array([float(x) for x in re.split(r"[\s,;\[\]]+", text) if x], dtype=np.float64)
@@ -279,11 +277,7 @@ def load_T_B_C0(path: Path) -> np.ndarray:
         vals = np.concatenate([vals, [0, 0, 0, 1]])
     if vals.size != 16:
         raise GeviError(path, f"expected 16 (or 12) numbers of a 4x4 cam0->body transform, got {vals.size}")
-    T = vals.reshape(4, 4)
-    R = T[:3, :3]
-    if np.abs(R @ R.T - np.eye(3)).max() > 1e-3 or np.linalg.det(R) < 0:
-        raise GeviError(path, "the 3x3 block of T_B_C0 is not a rotation")
-    return T
+    return matrix(vals.reshape(4, 4), path, "T_B_C0")  # the checks every calibration reader applies
 
 
 def load_groundtruth(path: Path, gt_frame: str = "body"):

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import re
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -123,8 +122,12 @@ def test_lone_db3_and_mcap_open(tmp_path):
     lone.parent.mkdir()
     shutil.copy(src, lone)  # a copy in the test's tmp folder only, without its metadata.yaml
     for path in (lone, lone.parent):
-        imu = BagImu(path, topics="gt=/pose")
-        assert len(imu.imu) == 1565 and len(imu.groundtruth) == 1565
+        imu = BagImu(path)
+        assert len(imu.imu) == 1565 and imu.groundtruth is None  # /pose is not named as ground truth
+    # its /pose holds placeholder values (SOURCE.md: not physical): quaternions of norm 13 are refused
+    with pytest.raises(GeviError) as info:
+        BagImu(lone, topics="gt=/pose")
+    assert "/pose:1: quaternion norm 13.19" in info.value.one_line()
     mcap = shared_path("real_bags", "evo_nav2_turtlebot_mcap", "nav2_turtlebot.mcap")
     with pytest.raises(GeviError) as info:
         BagImu(mcap)
