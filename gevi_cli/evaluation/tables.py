@@ -64,6 +64,7 @@ class Table:
     sequences: list
     cells: dict = field(default_factory=dict)  # (sequence, method) -> Cell
     note: str = ""
+    average_row: bool = True  # False for tables whose rows are not sequences (a runtime table's stages)
 
     def cell(self, sequence: str, method: str) -> Cell:
         return self.cells.get((sequence, method), Cell())
@@ -91,7 +92,7 @@ class Table:
             yield s, "mean", {m: self.cell(s, m) for m in self.methods}
             if trials:
                 yield f"{s} median (min, max)", "median", {m: self.cell(s, m) for m in self.methods}
-        if len(self.sequences) > 1 or not trials:
+        if self.average_row and (len(self.sequences) > 1 or not trials):
             yield "average", "average", {m: self.average(m) for m in self.methods}
 
 
@@ -110,6 +111,8 @@ def _cell_text(kind: str, c) -> tuple[str, float]:
     """(text without marks, value used for ranking)."""
     if kind == "average":
         return fmt(c), c
+    if c.n_trials == 0:  # never run (e.g. a baseline that does not exist for this sequence)
+        return "n/a", float("nan")
     if c.failed:
         return "failed", float("nan")
     failed_note = f" [{c.n_trials - c.n_ok}/{c.n_trials} failed]" if c.n_ok < c.n_trials else ""
@@ -214,5 +217,6 @@ def render_csv(table: Table) -> str:
         if table.has_trials:
             w.writerow([s, "n_ok"] + [table.cell(s, m).n_ok for m in table.methods])
             w.writerow([s, "n_trials"] + [table.cell(s, m).n_trials for m in table.methods])
-    w.writerow(["average", "mean"] + [num(table.average(m)) for m in table.methods])
+    if table.average_row:
+        w.writerow(["average", "mean"] + [num(table.average(m)) for m in table.methods])
     return buf.getvalue()
