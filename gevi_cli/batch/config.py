@@ -149,7 +149,7 @@ class BatchConfig:
 def slug(name: str) -> str:
     import re
 
-    s = re.sub(r"[^A-Za-z0-9._+]+", "_", name.replace("--", "")).strip("_")
+    s = re.sub(r"[^A-Za-z0-9._+-]+", "_", name.replace("--", "")).strip("_")
     return s or "method"
 
 
