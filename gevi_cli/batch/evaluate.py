@@ -43,6 +43,25 @@ def _gt_loader():
     return load
 
 
+def _clip_to_run(gt, run_dir: Path, margin_s: float):
+    """The ground truth over the frames the run was given (frames.csv span): a dataset whose ground
+    truth outlasts its images (euroc_micro: 4.7 s of frames, 145 s of ground truth), or a run limited by
+    ``max_frames``, is judged on the coverage of its own frames.  Indexed (KITTI) ground truth is kept."""
+    if gt.indexed:
+        return gt
+    try:
+        import pandas as pd
+
+        t = pd.read_csv(run_dir / "frames.csv", usecols=["t_ns"])["t_ns"].to_numpy()
+    except (OSError, ValueError, KeyError):
+        return gt
+    if len(t) == 0:
+        return gt
+    m = int(margin_s * 1e9)
+    keep = (gt.t_ns >= t.min() - m) & (gt.t_ns <= t.max() + m)
+    return gt.select(np.flatnonzero(keep)) if keep.sum() >= 3 else gt
+
+
 def _T(spec_T, T_seq):
     if isinstance(spec_T, (tuple, list)):
         return np.asarray(spec_T, dtype=float).reshape(4, 4)
@@ -89,6 +108,7 @@ def evaluate_batch(specs, baselines, settings, inertial_methods: set) -> BatchRe
                 continue
             try:
                 gt, T, raw = load(gt_path)
+                gt = _clip_to_run(gt, Path(spec.run_dir), settings.max_diff_s)
                 est = read_trajectory(primary, name=spec.method)
                 r = evaluate_pair(gt, est, settings, align, method=spec.method, sequence=spec.sequence, trial=trial,
                                   T_B_C0=T, gt_raw=raw)

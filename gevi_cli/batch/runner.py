@@ -20,9 +20,25 @@ def default_out(cfg) -> Path:
     return Path(cfg.output) if cfg.output else Path("results") / "batch" / cfg.name
 
 
-def prepare(config_path, out=None, echo=print):
+def select(cfg, sequences=None, trials=None):
+    """Restrict ``cfg`` to some sequences (names) and/or override every method's trial count."""
+    from gevi_cli.errors import GeviError
+
+    if sequences:
+        names = [n for item in sequences for n in item.split(",") if n]
+        unknown = [n for n in names if n not in {s.name for s in cfg.sequences}]
+        if unknown:
+            raise GeviError("--sequences", f"no sequence {unknown[0]!r} in {cfg.path}; it has "
+                                           f"{', '.join(s.name for s in cfg.sequences)}")
+        cfg.sequences = [s for s in cfg.sequences if s.name in names]
+    if trials:
+        cfg.methods = [dataclasses.replace(m, trials=trials) for m in cfg.methods]
+    return cfg
+
+
+def prepare(config_path, out=None, echo=print, sequences=None, trials=None):
     """(cfg, out, specs with rendered sources, baseline runs, skipped) — every config check first."""
-    cfg = load_batch_config(config_path)
+    cfg = select(load_batch_config(config_path), sequences, trials)
     check_methods_fit(cfg)
     baselines = baseline_runs(cfg)  # reads every baseline file: an unreadable one stops here
     out = Path(out) if out else default_out(cfg)
@@ -45,7 +61,8 @@ def render_sources(cfg, specs, echo=print, progress=False):
 
 
 def run_batch(config_path, out=None, *, jobs: int = 1, force: bool = False, executor: str = "local",
-              scheduler: str | None = None, echo=print, progress: bool | None = None) -> int:
+              scheduler: str | None = None, echo=print, progress: bool | None = None, sequences=None,
+              trials: int | None = None) -> int:
     from gevi_cli.batch.evaluate import evaluate_batch
     from gevi_cli.batch.executors import execute_all
     from gevi_cli.batch.report import write_batch_report
@@ -53,7 +70,7 @@ def run_batch(config_path, out=None, *, jobs: int = 1, force: bool = False, exec
 
     t0 = time.perf_counter()
     tty = sys.stderr.isatty() if progress is None else progress
-    cfg, out, specs, baselines, skipped = prepare(config_path, out, echo)
+    cfg, out, specs, baselines, skipped = prepare(config_path, out, echo, sequences, trials)
     specs = render_sources(cfg, specs, echo, progress=tty)
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.yaml").write_text(Path(config_path).read_text())
@@ -83,7 +100,7 @@ def _dispatch(todo, executor, jobs, scheduler, echo, tty, execute_all) -> None:
 
     if not todo:
         return
-    n_bad = 0
+    n_bad, t0 = 0, time.perf_counter()
     bar = tqdm(total=len(todo), unit="run", disable=not tty, dynamic_ncols=True, desc="gevi batch")
     try:
         for k, (spec, marker) in enumerate(execute_all(todo, executor, jobs, scheduler), 1):
@@ -96,8 +113,7 @@ def _dispatch(todo, executor, jobs, scheduler, echo, tty, execute_all) -> None:
             if tty:
                 bar.write(line)
             else:
-                elapsed = bar.format_dict["elapsed"]
-                left = elapsed / k * (len(todo) - k)
+                left = (time.perf_counter() - t0) / k * (len(todo) - k)
                 echo(f"{line}; {len(todo) - k} left, about {left:.0f} s")
     finally:
         bar.close()

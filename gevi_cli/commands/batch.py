@@ -29,10 +29,14 @@ Config schema, results tree, resume and the report: docs/batch.md.
 @click.option("--executor", type=click.Choice(["local", "dask"]), default="local", show_default=True,
               help="local: --jobs processes here; dask: the dask.distributed cluster at --scheduler.")
 @click.option("--scheduler", metavar="ADDRESS", default=None, help="dask scheduler address (tcp://host:8786).")
-def command(config, out, jobs, force, executor, scheduler):
+@click.option("--sequences", "sequences", multiple=True, metavar="NAME[,NAME]",
+              help="Run only these sequences of CONFIG (repeatable).")
+@click.option("--trials", type=click.IntRange(min=1), default=None, help="Override every method's trial count.")
+def command(config, out, jobs, force, executor, scheduler, sequences, trials):
     """Run every method (and trial) of CONFIG on every sequence, evaluate, and write one report."""
     from gevi_cli.batch.runner import run_batch
 
-    code = run_batch(config, out, jobs=jobs, force=force, executor=executor, scheduler=scheduler, echo=click.echo)
+    code = run_batch(config, out, jobs=jobs, force=force, executor=executor, scheduler=scheduler, echo=click.echo,
+                     sequences=sequences, trials=trials)
     if code:
         raise click.exceptions.Exit(code)

@@ -104,7 +104,10 @@ def fmt(v: float) -> str:
         return f"{v:.1f}"
     if a >= 1:
         return f"{v:.3f}"
-    return f"{v:.4f}"
+    if a >= 0.1 or a == 0:
+        return f"{v:.4f}"
+    # three significant digits below 0.1: sub-millimetre errors in metres stay readable (0.000712)
+    return f"{v:.{2 - math.floor(math.log10(a))}f}"
 
 
 def _cell_text(kind: str, c) -> tuple[str, float]:
