@@ -200,7 +200,7 @@ class _Ctx:
     def scalar(self, entry: dict, key: str, where: str, typ, default=None, check=None):
         if key not in entry:
             return default
-        k, v = entry[key]
+        _, v = entry[key]
         val = _value(v)
         if val is None:
             return default
@@ -436,7 +436,10 @@ def _baselines(ctx, node, cfg: BatchConfig) -> list:
         t_node = b.get("T_B_C0", (None, None))[1]
         T = _value(t_node) if t_node is not None else ("sequence" if frame == "cam0" else "identity")
         if isinstance(T, list):
-            arr = np.asarray(T, dtype=float) if all(isinstance(r, list) for r in T) else np.asarray(T, dtype=float)
+            try:
+                arr = np.asarray(T, dtype=float)  # 4 rows of 4, or 16 numbers
+            except ValueError:
+                raise ctx.err(t_node, f"{where}.T_B_C0", "expected a 4x4 matrix of numbers") from None
             if arr.size != 16:
                 raise ctx.err(t_node, f"{where}.T_B_C0", f"expected a 4x4 matrix, got {arr.size} numbers")
             T = tuple(map(float, arr.reshape(-1)))

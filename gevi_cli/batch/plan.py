@@ -118,7 +118,8 @@ def baseline_runs(cfg: BatchConfig) -> list[BaselineRun]:
             if seq.skip_reason or (b.sequences is not None and seq.name not in b.sequences):
                 continue
             d = cfg.resolve(b.path.format(sequence=seq.name))
-            common = dict(name=b.name, ident=b.ident, sequence=seq.name, frame=b.frame, T_B_C0=b.T_B_C0, fmt=b.fmt)
+            common = {"name": b.name, "ident": b.ident, "sequence": seq.name, "frame": b.frame, "T_B_C0": b.T_B_C0,
+                      "fmt": b.fmt}
             if not d.exists():
                 out.append(BaselineRun(path=None, state="n/a", reason=f"{d} is absent", **common))
                 continue

@@ -147,15 +147,15 @@ def _markdown(cfg, specs, baselines, res, se3, posyaw, runtime, skipped, pngs, r
     for r in res.runs:
         states[r["state"]] = states.get(r["state"], 0) + 1
     not_run = len(specs) - len(res.runs)
-    L = [f"# gevi batch: {cfg.name}", "",
-         f"Config `{cfg.path.name}`, gevi {version}, {time.strftime('%Y-%m-%d %H:%M %Z')}; "
-         f"{len(specs)} runs ({', '.join(f'{n} {s}' for s, n in sorted(states.items()))}"
-         + (f", {not_run} not run" if not_run else "") + f"); wall time {elapsed_s:.0f} s ({executor}).", "",
-         "Every comparison across methods: SE(3) alignment over all poses, body frame, RPE over consecutive frames "
-         f"(delta {cfg.eval.rpe_delta:g} frame); estimates covering less than {100 * cfg.eval.min_coverage:g} % of "
-         "the ground-truth time span are `failed`. Trials: mean ± std and median (min, max); trial k runs with "
-         "RANSAC seed k. **Bold** best, _italic_ second. `failed`: the run broke (crashed, no trajectory, or "
-         "too little coverage); `n/a`: never run.", ""]
+    counts = ", ".join(f"{n} {s}" for s, n in sorted(states.items())) + (f", {not_run} not run" if not_run else "")
+    intro = (f"Config `{cfg.path.name}`, gevi {version}, {time.strftime('%Y-%m-%d %H:%M %Z')}; {len(specs)} runs "
+             f"({counts}); wall time {elapsed_s:.0f} s ({executor}).")
+    rules = ("Every comparison across methods: SE(3) alignment over all poses, body frame, RPE over consecutive "
+             f"frames (delta {cfg.eval.rpe_delta:g} frame); estimates covering less than "
+             f"{100 * cfg.eval.min_coverage:g} % of the ground-truth time span are `failed`. Trials: mean ± std and "
+             "median (min, max); trial k runs with RANSAC seed k. **Bold** best, _italic_ second. `failed`: the run "
+             "broke (crashed, no trajectory, or too little coverage); `n/a`: never run.")
+    L = [f"# gevi batch: {cfg.name}", "", intro, "", rules, ""]
     L += ["## Settings", "", "| method | `gevi run` options | trials |", "|---|---|---|"]
     L += [f"| {m.name} | `{' '.join(m.args)}` | {m.trials} |" for m in cfg.methods]
     L += ["", "| sequence | source | methods |", "|---|---|---|"]
@@ -196,8 +196,8 @@ def _markdown(cfg, specs, baselines, res, se3, posyaw, runtime, skipped, pngs, r
     L += ["## Runtime", "", render_markdown(runtime)]
     if pngs:
         L += ["## Plots", ""] + [f"![{p.stem}]({p.relative_to(report_dir)})" for p in pngs] + [""]
-    L += ["Every table also as CSV and LaTeX in `tables/`; every number in `metrics.json`; per run in "
-          "`results.json` and `runs.csv`.", ""]
+    L += [("Every table also as CSV and LaTeX in `tables/`; every number in `metrics.json`; per run in "
+           "`results.json` and `runs.csv`."), ""]
     return "\n".join(L)
 
 
@@ -219,10 +219,11 @@ def _inline(text: str) -> str:
 
 def markdown_to_html(md: str, base: Path, title: str) -> str:
     """The report's Markdown (headings, paragraphs, tables, images) as one self-contained HTML page."""
-    out = [f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title><style>"
-           "body{font-family:sans-serif;max-width:1200px;margin:2em auto;padding:0 1em}"
-           "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}"
-           "td:first-child,th:first-child{text-align:left}img{max-width:100%}</style></head><body>"]
+    style = ("body{font-family:sans-serif;max-width:1200px;margin:2em auto;padding:0 1em}"
+             "table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}"
+             "td:first-child,th:first-child{text-align:left}img{max-width:100%}")
+    head = f"<!doctype html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+    out = [f"{head}<style>{style}</style></head><body>"]
     lines = md.splitlines()
     i = 0
     while i < len(lines):

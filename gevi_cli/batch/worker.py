@@ -68,23 +68,21 @@ def run_one(spec) -> dict:
     run_dir = Path(spec.run_dir)
     _clear(run_dir)
     t0 = time.perf_counter()
-    log = open(run_dir / "run.log", "w", buffering=1)
-
-    def echo(msg="", err=False, **_):
-        log.write(("[stderr] " if err else "") + str(msg) + "\n")
-
     code, message = 0, ""
-    try:
-        code = execute(spec.request(), echo=echo)
-    except GeviError as exc:
-        code, message = 2, exc.one_line()
-    except Exception as exc:  # noqa: BLE001 - a crash is recorded and the batch goes on
-        import traceback
+    with open(run_dir / "run.log", "w", buffering=1) as log:
 
-        code, message = 1, f"{type(exc).__name__}: {exc}"
-        log.write(traceback.format_exc())
-    finally:
-        log.close()
+        def echo(msg="", err=False, **_):
+            log.write(("[stderr] " if err else "") + str(msg) + "\n")
+
+        try:
+            code = execute(spec.request(), echo=echo)
+        except GeviError as exc:
+            code, message = 2, exc.one_line()
+        except Exception as exc:  # noqa: BLE001 - a crash is recorded and the batch goes on
+            import traceback
+
+            code, message = 1, f"{type(exc).__name__}: {exc}"
+            log.write(traceback.format_exc())
     status = read_status(run_dir)
     if code in (1, 2):
         # the driver wrote "crashed" if the odometry itself raised; a failure before (bad input) has no status

@@ -13,7 +13,6 @@ from pathlib import Path
 
 import pytest
 from helpers import markers, trajectory_bytes, tree
-
 from support import run_cli
 
 
@@ -150,8 +149,8 @@ baselines:
     assert run_batch(cfg, out, jobs=1, echo=lines.append, progress=False) == 0
     cells = json.loads((out / "report/results.json").read_text())["cells"]["ate_trans_rmse"]["pool-easy-5s"]
     run_ate = json.loads((out / "runs/cfo/pool-easy-5s/trial1/done.json").read_text())
-    ate_cfo1 = [r for r in json.loads((out / "report/results.json").read_text())["runs"]
-                if r["run_id"] == "cfo/pool-easy-5s/trial1"][0]["ate_m"]
+    ate_cfo1 = next(r for r in json.loads((out / "report/results.json").read_text())["runs"]
+                    if r["run_id"] == "cfo/pool-easy-5s/trial1")["ate_m"]
     assert run_ate["state"] == "ok"
     assert cells["other-cam0"]["mean"] == pytest.approx(ate_cfo1, rel=1e-6, abs=1e-9)
     assert cells["other-as-body"]["mean"] > 1.5 * ate_cfo1

@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
 from support import REPO, SHARED_DATA, run_cli
 
 GOOD = """\
@@ -50,7 +49,7 @@ def test_bad_config_is_one_line_exit_2_before_any_run(case, tmp_path, capsys):
     cfg = tmp_path / "bad.yaml"
     cfg.write_text(text.replace("{base}", str(base)).replace("{{sequence}}", "{sequence}"))
     out = tmp_path / "out"
-    code, stdout, stderr = run_cli(["batch", cfg, "-o", out], capsys)
+    code, _, stderr = run_cli(["batch", cfg, "-o", out], capsys)
     assert code == 2, stderr
     lines = stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"gevi: error: {cfg}"), stderr
