@@ -56,7 +56,7 @@ def runtime_table(runs, methods) -> Table:
     note = "frames/s (frames over wall time of the odometry, mean over runs): " + ", ".join(
         f"{m} {fps[m]:.1f}" for m in methods if m in fps)
     return Table("runtime", "Runtime per stage [ms per frame] — mean over every frame of every run", list(methods),
-                 list(RUNTIME_STAGES), cells, note=note, average_row=False)
+                 list(RUNTIME_STAGES), cells, note=note, average_row=False, row_label="stage")
 
 
 def _tables(res, methods, sequences, inertial, settings):

@@ -65,6 +65,7 @@ class Table:
     cells: dict = field(default_factory=dict)  # (sequence, method) -> Cell
     note: str = ""
     average_row: bool = True  # False for tables whose rows are not sequences (a runtime table's stages)
+    row_label: str = "sequence"  # header of the first column
 
     def cell(self, sequence: str, method: str) -> Cell:
         return self.cells.get((sequence, method), Cell())
@@ -153,7 +154,7 @@ MARKS = {
 
 def _grid(table: Table, style: str) -> list[list[str]]:
     best, second = MARKS[style]
-    grid = [["sequence"] + list(table.methods)]
+    grid = [[table.row_label] + list(table.methods)]
     for label, kind, cells in table.rows():
         texts, vals = {}, {}
         for m, c in cells.items():

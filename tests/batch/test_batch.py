@@ -40,7 +40,8 @@ def test_small_batch_results_tree_and_report(small_batch):
         assert (rep / "tables" / f"ate_trans_rmse.{ext}").is_file()
         assert (rep / "tables" / f"runtime.{ext}").is_file()
     html = (rep / "report.html").read_text()
-    assert "data:image/png;base64," in html and "<table>" in html and 'src="plots' not in html
+    pngs = list((rep / "plots").glob("*.png"))
+    assert pngs and html.count("src='data:image/png;base64,") == len(pngs) and "<table>" in html
     res = json.loads((rep / "results.json").read_text())
     assert len(res["runs"]) == 4 and all(r["ate_m"] > 0 and r["rpe_m"] > 0 for r in res["runs"])
 
@@ -121,10 +122,12 @@ def test_worse_estimator_fails_the_gate(small_config, small_batch, tmp_path, mon
     assert "worse than expected" in out_text.splitlines()[-1]
 
 
-def test_baseline_column_frame_and_na(small_batch, tmp_path):
+def test_baselines_and_a_crashing_run(small_batch, tmp_path):
     """A baseline declared in the cam0 frame is converted with the sequence's T_B_C0 (same ATE as the
     run it came from); declared as body it is not, and reads worse (the ORB-SLAM3 cam0-as-body mistake);
-    a sequence without the system's folder is n/a, a folder without its file is failed."""
+    a sequence without the system's folder is n/a, a folder without its file is failed.  A run that
+    crashes (here: a sequence folder that is no dataset) is recorded with its message, the batch goes
+    on (the other new run is made) and exits 3; finished runs of the copied tree are not redone."""
     from gevi_cli.batch.runner import run_batch
 
     out = tmp_path / "out"
@@ -133,10 +136,14 @@ def test_baseline_column_frame_and_na(small_batch, tmp_path):
     (base / "pool-easy-5s").mkdir(parents=True)
     shutil.copy(out / "runs/cfo/pool-easy-5s/trial1/traj_cam0.tum", base / "pool-easy-5s/traj.txt")
     (base / "pool-easy-5s-empty").mkdir()
+    (tmp_path / "not_a_dataset").mkdir()
     cfg_text = Path(small_batch[0] / "config.yaml").read_text()
     cfg_text += f"""\
   - name: pool-easy-5s-empty
     simulate: {{preset: pool-easy, seed: 3, duration: 5, rate: 10, resolution: 376x240}}
+    methods: [cfo]
+  - name: broken
+    path: {tmp_path / "not_a_dataset"}
     methods: [cfo]
 baselines:
   - {{name: other-cam0, path: {base}/{{sequence}}, file: traj.txt, format: tum, frame: cam0, T_B_C0: sequence}}
@@ -144,9 +151,15 @@ baselines:
   - {{name: other-missing, path: {base}/{{sequence}}/none, file: traj.txt, format: tum, frame: body}}
 """
     cfg = tmp_path / "with_baselines.yaml"
-    cfg.write_text(cfg_text.replace("cfo\nsequences:", "cfo\nsequences:"))
+    cfg.write_text(cfg_text)
     lines = []
-    assert run_batch(cfg, out, jobs=1, echo=lines.append, progress=False) == 0
+    assert run_batch(cfg, out, jobs=1, echo=lines.append, progress=False) == 3
+    assert "gevi batch: 4 of 8 runs already finished (--force redoes them)" in lines
+    crashed = json.loads((out / "runs/cfo/broken/trial1/done.json").read_text())
+    assert crashed["state"] == "crashed" and "not_a_dataset" in crashed["message"]
+    assert json.loads((out / "runs/cfo/broken/trial1/status.json").read_text())["state"] == "crashed"
+    assert any(ln.startswith("gevi batch: cfo/broken/trial1: crashed: ") for ln in lines)
+    assert (out / "runs/cfo/pool-easy-5s-empty/trial2/done.json").is_file()  # the batch went on
     cells = json.loads((out / "report/results.json").read_text())["cells"]["ate_trans_rmse"]["pool-easy-5s"]
     run_ate = json.loads((out / "runs/cfo/pool-easy-5s/trial1/done.json").read_text())
     ate_cfo1 = next(r for r in json.loads((out / "report/results.json").read_text())["runs"]
@@ -162,3 +175,6 @@ baselines:
     assert vals["gevi"] == "n/a"  # not run there (methods: [cfo])
     assert vals["other-cam0"] == "failed"  # folder without the trajectory: the system wrote nothing
     assert vals["other-missing"] == "n/a"  # never run on any sequence
+    broken_row = next(ln for ln in ate_table.splitlines() if ln.startswith("| broken "))
+    assert dict(zip(cols, [c.strip() for c in broken_row.strip("|").split("|")]))["cfo"] == "failed"
+    assert "| cfo/broken/trial1 | crashed |" in md

@@ -18,7 +18,7 @@ sequences:
 
 BAD = {
     "unknown top-level key": (GOOD + "colour: red\n", ":7:", "colour: unknown key"),
-    "unknown sequence key": (GOOD.replace("    simulate:", "    speed: 3\n    simulate:"), ":5:",
+    "unknown sequence key": (GOOD.replace("    simulate:", "    speed: 3\n    simulate:"), ":6:",
                              "sequences[].speed: unknown key"),
     "unknown simulate option": (GOOD.replace("duration: 1", "duraton: 1"), ":6:", "sequences.s.simulate.duraton"),
     "missing sequence path": (GOOD.replace("simulate: {preset: pool-easy, duration: 1}", "path: no/such/folder"),
