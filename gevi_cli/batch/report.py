@@ -202,10 +202,10 @@ def _markdown(cfg, specs, baselines, res, se3, posyaw, runtime, skipped, pngs, r
 
 
 def _short(p: str, root: Path) -> str:
-    try:
-        return str(Path(p).resolve().relative_to(root))
-    except ValueError:
-        return str(p)
+    """``p`` relative to the config's root (how the config wrote it; no machine-specific prefix)."""
+    import os
+
+    return os.path.relpath(p, root) if Path(p).is_absolute() else str(p)
 
 
 # -------------------------------------------------------------------------------------- html

@@ -111,6 +111,15 @@ def fmt(v: float) -> str:
     return f"{v:.{2 - math.floor(math.log10(a))}f}"
 
 
+def _fmt_like(v: float, ref: str) -> str:
+    """``v`` with the decimals of ``ref``: a spread printed to the precision of its mean (the CSV
+    tables hold the exact values)."""
+    if v is None or math.isnan(v):
+        return "n/a"
+    decimals = len(ref.split(".")[1]) if "." in ref else 0
+    return f"{v:.{decimals}f}"
+
+
 def _cell_text(kind: str, c) -> tuple[str, float]:
     """(text without marks, value used for ranking)."""
     if kind == "average":
@@ -125,7 +134,8 @@ def _cell_text(kind: str, c) -> tuple[str, float]:
             return fmt(c.stat("median")), c.stat("median")
         return f"{fmt(c.stat('median'))} ({fmt(c.stat('min'))}, {fmt(c.stat('max'))}){failed_note}", c.stat("median")
     if c.n_trials > 1:
-        return f"{fmt(c.stat('mean'))} ± {fmt(c.stat('std'))}{failed_note}", c.stat("mean")
+        mean = fmt(c.stat("mean"))
+        return f"{mean} ± {_fmt_like(c.stat('std'), mean)}{failed_note}", c.stat("mean")
     return fmt(c.stat("mean")), c.stat("mean")
 
 
