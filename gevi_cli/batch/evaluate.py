@@ -96,7 +96,8 @@ def evaluate_batch(specs, baselines, settings, inertial_methods: set) -> BatchRe
                "seed": spec.seed, "state": marker["state"], "message": marker.get("message", ""),
                "frames_total": st.get("frames_total", 0), "frames_done": st.get("frames_done", 0),
                "frames_tracked": st.get("frames_tracked", 0), "elapsed_s": st.get("elapsed_s", 0.0),
-               "lost_intervals": st.get("lost_intervals", []), "run_dir": spec.run_dir}
+               "lost_intervals": st.get("lost_intervals", []), "wall_s": marker.get("wall_s", 0.0),
+               "run_dir": spec.run_dir}
         out.runs.append(run)
         primary = run_primary(Path(spec.run_dir)) if marker["state"] != "crashed" else None
         aligns = ["se3"] + (["posyaw"] if spec.method in inertial_methods else [])

@@ -148,14 +148,18 @@ def _markdown(cfg, specs, baselines, res, se3, posyaw, runtime, skipped, pngs, r
         states[r["state"]] = states.get(r["state"], 0) + 1
     not_run = len(specs) - len(res.runs)
     counts = ", ".join(f"{n} {s}" for s, n in sorted(states.items())) + (f", {not_run} not run" if not_run else "")
+    worker_s = sum(r.get("wall_s", 0.0) for r in res.runs)
     intro = (f"Config `{cfg.path.name}`, gevi {version}, {time.strftime('%Y-%m-%d %H:%M %Z')}; {len(specs)} runs "
-             f"({counts}); wall time {elapsed_s:.0f} s ({executor}).")
+             f"({counts}) taking {worker_s:.0f} s of worker time; this invocation {elapsed_s:.0f} s ({executor}).")
     rules = ("Every comparison across methods: SE(3) alignment over all poses, body frame, RPE over consecutive "
              f"frames (delta {cfg.eval.rpe_delta:g} frame); estimates covering less than "
              f"{100 * cfg.eval.min_coverage:g} % of the ground-truth time span are `failed`. Trials: mean ± std and "
              "median (min, max); trial k runs with RANSAC seed k. **Bold** best, _italic_ second. `failed`: the run "
              "broke (crashed, no trajectory, or too little coverage); `n/a`: never run.")
-    L = [f"# gevi batch: {cfg.name}", "", intro, "", rules, ""]
+    import sys
+
+    command = " ".join(["gevi"] + sys.argv[1:]) if Path(sys.argv[0]).name in ("gevi", "cli.py") else ""
+    L = [f"# gevi batch: {cfg.name}", "", intro + (f" Command: `{command}`." if command else ""), "", rules, ""]
     L += ["## Settings", "", "| method | `gevi run` options | trials |", "|---|---|---|"]
     L += [f"| {m.name} | `{' '.join(m.args)}` | {m.trials} |" for m in cfg.methods]
     L += ["", "| sequence | source | methods |", "|---|---|---|"]
