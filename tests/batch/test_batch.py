@@ -179,3 +179,29 @@ baselines:
     broken_row = next(ln for ln in ate_table.splitlines() if ln.startswith("| broken "))
     assert dict(zip(cols, [c.strip() for c in broken_row.strip("|").split("|")]))["cfo"] == "failed"
     assert "| cfo/broken/trial1 | crashed |" in md
+
+
+def test_absent_optional_sequence_is_skipped_and_left_out_by_regress(small_batch, tmp_path, capsys):
+    """An optional sequence whose data is absent is skipped with the reason printed; `gevi regress`
+    leaves its rows out and says so, and still gates the rest."""
+    import yaml
+
+    from gevi_cli.batch.regress import write_expected
+    from gevi_cli.batch.runner import run_batch
+
+    out = tmp_path / "out"
+    shutil.copytree(small_batch[0], out)
+    cfg = tmp_path / "with_absent.yaml"
+    cfg.write_text((small_batch[0] / "config.yaml").read_text()
+                   + f"  - {{name: gone, path: '{tmp_path / 'absent_data'}', optional: true}}\n")
+    lines = []
+    assert run_batch(cfg, out, jobs=1, echo=lines.append, progress=False) == 0
+    assert any(ln.startswith("gevi batch: skipping sequence gone: ") and "absent_data" in ln for ln in lines)
+    expected = write_expected(small_batch[0], tmp_path / "expected.yaml")
+    doc = yaml.safe_load(expected.read_text())
+    doc["entries"]["gone"] = {"cfo": {"ate_m": {"expected": 0.001, "tol": 0.0001}}}
+    expected.write_text(yaml.safe_dump(doc))
+    code, text, _ = run_cli(["regress", out, "--against", expected], capsys)
+    assert code == 0, text
+    assert "note: gone: left out, the batch skipped it" in text and "| gone |" not in text
+    assert "| pool-easy-5s | cfo | ATE |" in text
