@@ -22,6 +22,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "simulate": ("gevi_cli.commands.simulate", "Render a synthetic stereo-IMU sequence with exact ground truth."),
     "run": ("gevi_cli.commands.run", "Run odometry (GeVI stereo-inertial or CurrentFeature stereo) and evaluate it."),
     "imu": ("gevi_cli.commands.imu", "IMU report: rate, gaps, standstills, biases, noise, roll/pitch over the stream."),
+    "batch": ("gevi_cli.commands.batch", "Sequences x methods x trials from a YAML config: runs, evaluation, one report."),
+    "regress": ("gevi_cli.commands.regress", "Compare a batch's ATE/RPE/frames tracked with expected values (CI gate)."),
 }
 
 EPILOG = """\b
@@ -34,6 +36,7 @@ Examples:
   gevi run                     # GeVI on the built-in pool-easy sample
   gevi run ../shared/data/kitti06_head/dataset/sequences/06 --method cfo
   gevi imu ../shared/data/euroc_micro --gt ../shared/data/euroc_micro/groundtruth/V1_01_easy.csv
+  gevi batch configs/batch/ci.yaml && gevi regress results/batch/ci --against tests/regression/expected.yaml
 """
 
 

@@ -64,6 +64,8 @@ class Table:
     sequences: list
     cells: dict = field(default_factory=dict)  # (sequence, method) -> Cell
     note: str = ""
+    average_row: bool = True  # False for tables whose rows are not sequences (a runtime table's stages)
+    row_label: str = "sequence"  # header of the first column
 
     def cell(self, sequence: str, method: str) -> Cell:
         return self.cells.get((sequence, method), Cell())
@@ -91,7 +93,7 @@ class Table:
             yield s, "mean", {m: self.cell(s, m) for m in self.methods}
             if trials:
                 yield f"{s} median (min, max)", "median", {m: self.cell(s, m) for m in self.methods}
-        if len(self.sequences) > 1 or not trials:
+        if self.average_row and (len(self.sequences) > 1 or not trials):
             yield "average", "average", {m: self.average(m) for m in self.methods}
 
 
@@ -103,13 +105,27 @@ def fmt(v: float) -> str:
         return f"{v:.1f}"
     if a >= 1:
         return f"{v:.3f}"
-    return f"{v:.4f}"
+    if a >= 0.1 or a == 0:
+        return f"{v:.4f}"
+    # three significant digits below 0.1: sub-millimetre errors in metres stay readable (0.000712)
+    return f"{v:.{2 - math.floor(math.log10(a))}f}"
+
+
+def _fmt_like(v: float, ref: str) -> str:
+    """``v`` with the decimals of ``ref``: a spread printed to the precision of its mean (the CSV
+    tables hold the exact values)."""
+    if v is None or math.isnan(v):
+        return "n/a"
+    decimals = len(ref.split(".")[1]) if "." in ref else 0
+    return f"{v:.{decimals}f}"
 
 
 def _cell_text(kind: str, c) -> tuple[str, float]:
     """(text without marks, value used for ranking)."""
     if kind == "average":
         return fmt(c), c
+    if c.n_trials == 0:  # never run (e.g. a baseline that does not exist for this sequence)
+        return "n/a", float("nan")
     if c.failed:
         return "failed", float("nan")
     failed_note = f" [{c.n_trials - c.n_ok}/{c.n_trials} failed]" if c.n_ok < c.n_trials else ""
@@ -118,7 +134,8 @@ def _cell_text(kind: str, c) -> tuple[str, float]:
             return fmt(c.stat("median")), c.stat("median")
         return f"{fmt(c.stat('median'))} ({fmt(c.stat('min'))}, {fmt(c.stat('max'))}){failed_note}", c.stat("median")
     if c.n_trials > 1:
-        return f"{fmt(c.stat('mean'))} ± {fmt(c.stat('std'))}{failed_note}", c.stat("mean")
+        mean = fmt(c.stat("mean"))
+        return f"{mean} ± {_fmt_like(c.stat('std'), mean)}{failed_note}", c.stat("mean")
     return fmt(c.stat("mean")), c.stat("mean")
 
 
@@ -147,7 +164,7 @@ MARKS = {
 
 def _grid(table: Table, style: str) -> list[list[str]]:
     best, second = MARKS[style]
-    grid = [["sequence"] + list(table.methods)]
+    grid = [[table.row_label] + list(table.methods)]
     for label, kind, cells in table.rows():
         texts, vals = {}, {}
         for m, c in cells.items():
@@ -214,5 +231,6 @@ def render_csv(table: Table) -> str:
         if table.has_trials:
             w.writerow([s, "n_ok"] + [table.cell(s, m).n_ok for m in table.methods])
             w.writerow([s, "n_trials"] + [table.cell(s, m).n_trials for m in table.methods])
-    w.writerow(["average", "mean"] + [num(table.average(m)) for m in table.methods])
+    if table.average_row:
+        w.writerow(["average", "mean"] + [num(table.average(m)) for m in table.methods])
     return buf.getvalue()

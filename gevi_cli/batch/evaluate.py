@@ -1,0 +1,143 @@
+"""The evaluator over a batch's results tree, with `gevi eval`'s code (evaluate_pair, build_tables).
+
+Every comparison across methods is SE(3) in the body frame with RPE over consecutive frames; the
+stereo-inertial methods (GeVI and its ablations) are also aligned in posyaw (4-DOF: gravity is
+known), in tables of their own.  A crashed run is a ``failed`` cell with its message; a (sequence,
+method) never run has no result at all and reads ``n/a``.  Units: metres, degrees, seconds.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from gevi_cli.batch.worker import read_marker
+from gevi_cli.errors import GeviError
+
+
+@dataclass
+class BatchResults:
+    """PairResults per alignment, per-run facts (state, frames, timing) and sequence ground truths."""
+
+    se3: list = field(default_factory=list)
+    posyaw: list = field(default_factory=list)
+    runs: list = field(default_factory=list)  # dicts: run_id, method, sequence, trial, state, message, ...
+    gts: dict = field(default_factory=dict)  # sequence -> ground truth Trajectory (trial 1)
+    problems: list = field(default_factory=list)  # "<sequence>: why it could not be evaluated"
+
+
+def _gt_loader():
+    from gevi_cli.evaluation.inputs import load_groundtruth
+    from gevi_cli.evaluation.kitti_devkit import raw_poses
+
+    cache = {}
+
+    def load(path: str):
+        if path not in cache:
+            gt, T = load_groundtruth(Path(path))
+            cache[path] = (gt, T, raw_poses(gt) if gt.indexed else None)
+        return cache[path]
+
+    return load
+
+
+def _clip_to_run(gt, run_dir: Path, margin_s: float):
+    """The ground truth over the frames the run was given (frames.csv span): a dataset whose ground
+    truth outlasts its images (euroc_micro: 4.7 s of frames, 145 s of ground truth), or a run limited by
+    ``max_frames``, is judged on the coverage of its own frames.  Indexed (KITTI) ground truth is kept."""
+    if gt.indexed:
+        return gt
+    try:
+        import pandas as pd
+
+        t = pd.read_csv(run_dir / "frames.csv", usecols=["t_ns"])["t_ns"].to_numpy()
+    except (OSError, ValueError, KeyError):
+        return gt
+    if len(t) == 0:
+        return gt
+    m = int(margin_s * 1e9)
+    keep = (gt.t_ns >= t.min() - m) & (gt.t_ns <= t.max() + m)
+    return gt.select(np.flatnonzero(keep)) if keep.sum() >= 3 else gt
+
+
+def _T(spec_T, T_seq):
+    if isinstance(spec_T, (tuple, list)):
+        return np.asarray(spec_T, dtype=float).reshape(4, 4)
+    if spec_T == "identity":
+        return np.eye(4)
+    if spec_T == "sequence":
+        return T_seq
+    from gevi_cli.evaluation.inputs import load_T_B_C0
+
+    return load_T_B_C0(Path(spec_T))
+
+
+def evaluate_batch(specs, baselines, settings, inertial_methods: set) -> BatchResults:
+    """Evaluate every finished run of ``specs`` and every baseline (see module docstring)."""
+    from gevi_cli.evaluation.evaluate import evaluate_pair, failed
+    from gevi_cli.evaluation.inputs import run_primary
+    from gevi_cli.run.folder import read_status
+    from gevi_cli.trajectory import read_trajectory
+
+    load = _gt_loader()
+    out = BatchResults()
+    seq_gt_path = {}
+    for spec in specs:
+        marker = read_marker(spec.run_dir)
+        if marker is None:
+            continue  # never finished: n/a
+        st = read_status(spec.run_dir) or {}
+        trial = f"trial{spec.trial}"
+        gt_path = spec.gt or spec.source
+        seq_gt_path.setdefault(spec.sequence, gt_path)
+        run = {"run_id": spec.run_id, "method": spec.method, "sequence": spec.sequence, "trial": spec.trial,
+               "seed": spec.seed, "state": marker["state"], "message": marker.get("message", ""),
+               "frames_total": st.get("frames_total", 0), "frames_done": st.get("frames_done", 0),
+               "frames_tracked": st.get("frames_tracked", 0), "elapsed_s": st.get("elapsed_s", 0.0),
+               "lost_intervals": st.get("lost_intervals", []), "wall_s": marker.get("wall_s", 0.0),
+               "run_dir": spec.run_dir}
+        out.runs.append(run)
+        primary = run_primary(Path(spec.run_dir)) if marker["state"] != "crashed" else None
+        aligns = ["se3"] + (["posyaw"] if spec.method in inertial_methods else [])
+        for align in aligns:
+            bucket = out.se3 if align == "se3" else out.posyaw
+            if primary is None:
+                bucket.append(failed(spec.method, spec.sequence, trial, None,
+                                     marker.get("message") or "crashed: no trajectory"))
+                continue
+            try:
+                gt, T, raw = load(gt_path)
+                gt = _clip_to_run(gt, Path(spec.run_dir), settings.max_diff_s)
+                est = read_trajectory(primary, name=spec.method)
+                r = evaluate_pair(gt, est, settings, align, method=spec.method, sequence=spec.sequence, trial=trial,
+                                  T_B_C0=T, gt_raw=raw)
+            except GeviError as exc:
+                r = failed(spec.method, spec.sequence, trial, primary, exc.one_line())
+            bucket.append(r)
+            if align == "se3" and spec.trial == 1 and spec.sequence not in out.gts:
+                try:
+                    out.gts[spec.sequence] = load(gt_path)[0]
+                except GeviError as exc:
+                    out.problems.append(f"{spec.sequence}: {exc.one_line()}")
+        if out.se3 and out.se3[-1].ok:
+            run["ate_m"] = out.se3[-1].ate.trans_rmse
+            run["rpe_m"] = out.se3[-1].rpe.trans_rmse if out.se3[-1].rpe is not None else None
+    for b in baselines:
+        if b.state == "n/a":
+            continue  # no result: the cell reads n/a
+        if b.state == "failed" or b.sequence not in seq_gt_path:
+            if b.state == "failed":
+                out.se3.append(failed(b.name, b.sequence, "", None, b.reason))
+            continue
+        try:
+            gt, T_seq, raw = load(seq_gt_path[b.sequence])
+            T = _T(b.T_B_C0, T_seq)
+            est = read_trajectory(b.path, name=b.name, frame=b.frame)
+            r = evaluate_pair(gt, est, dataclasses.replace(settings, est_frame=b.frame), "se3", method=b.name,
+                              sequence=b.sequence, trial="", T_B_C0=T, gt_raw=raw)
+        except GeviError as exc:
+            r = failed(b.name, b.sequence, "", b.path, exc.one_line())
+        out.se3.append(r)
+    return out
