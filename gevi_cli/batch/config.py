@@ -155,16 +155,15 @@ def slug(name: str) -> str:
 
 # ----------------------------------------------------------------------------------- YAML with lines
 def _compose(path: Path):
+    """The config's YAML nodes (for line numbers), read as every YAML file of the project is read."""
+    from gevi_cli.datasets.yamlio import YamlLoader, yaml_error, yaml_text
+
+    text = yaml_text(path, "batch config")
     try:
-        text = path.read_text()
-    except OSError as exc:
-        raise GeviError(path, f"cannot read the batch config: {exc.strerror}") from None
-    try:
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
+        node = yaml.compose(text, Loader=YamlLoader)
+        yaml.load(text, Loader=YamlLoader)  # noqa: S506 (SafeLoader subclass): duplicate keys, at their line
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark else str(path)
-        raise GeviError(where, f"not valid YAML: {getattr(exc, 'problem', exc)}") from None
+        raise yaml_error(path, exc) from None
     if node is None:
         raise GeviError(path, "is empty; expected methods: and sequences:")
     return node

@@ -121,11 +121,10 @@ def write_expected(results_dir: Path, target: Path, rule: dict | None = None) ->
 def load_expected(path: Path) -> tuple[dict, dict]:
     if not Path(path).is_file():
         raise GeviError("--against", f"{path}: no such file")
-    try:
-        doc = yaml.safe_load(Path(path).read_text())
-    except yaml.YAMLError as exc:
-        raise GeviError(path, f"not valid YAML: {exc}") from None
-    if not isinstance(doc, dict) or not isinstance(doc.get("entries"), dict):
+    from gevi_cli.datasets.yamlio import load_yaml
+
+    doc = load_yaml(Path(path), what="expected-values file")
+    if not isinstance(doc.get("entries"), dict):
         raise GeviError(path, "expected keys rule: and entries: {sequence: {method: {metric: {expected, tol}}}}")
     for seq, methods in doc["entries"].items():
         for method, metrics in (methods or {}).items():

@@ -35,14 +35,11 @@ _OpenCVLoader.add_constructor("tag:yaml.org,2002:opencv-matrix", yaml.SafeLoader
 _OpenCVLoader.add_constructor("tag:yaml.org,2002:opencv-nd-matrix", yaml.SafeLoader.construct_mapping)
 
 
-def load_yaml(path: Path, *, empty_ok: bool = False, what: str = "file") -> dict:
-    """A YAML mapping from ``path``; every error is one line naming the file (and the line).
+YamlLoader = _OpenCVLoader  # for readers that need YAML's nodes (line numbers): yaml.compose(text, Loader=YamlLoader)
 
-    Takes what real datasets write: OpenCV's ``%YAML:1.0`` directive (PyYAML rejects it; the line is
-    blanked, not dropped, so YAML's line numbers stay the file's) and ``!!opencv-matrix`` tags, a
-    UTF-8 BOM, CRLF line ends.
-    ``empty_ok``: an empty file is ``{}`` (configs) instead of an error.
-    """
+
+def yaml_text(path: Path, what: str = "file") -> str:
+    """The text of a YAML file as :func:`load_yaml` parses it (BOM dropped, ``%YAML:1.0`` line blanked)."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8-sig")
@@ -55,13 +52,31 @@ def load_yaml(path: Path, *, empty_ok: bool = False, what: str = "file") -> dict
     lines = text.splitlines()
     if lines and lines[0].startswith("%YAML") and ":" in lines[0]:
         lines[0] = ""
+    return "\n".join(lines)
+
+
+def yaml_error(path: Path, err: Exception) -> DataError:
+    """A PyYAML error as one line with the file and the line."""
+    mark = getattr(err, "problem_mark", None)
+    where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
+    problem = " ".join(str(getattr(err, "problem", None) or "syntax error").split())
+    return DataError(where, f"is not valid YAML ({problem})")
+
+
+def load_yaml(path: Path, *, empty_ok: bool = False, what: str = "file") -> dict:
+    """A YAML mapping from ``path``; every error is one line naming the file (and the line).
+
+    Takes what real datasets write: OpenCV's ``%YAML:1.0`` directive (PyYAML rejects it; the line is
+    blanked, not dropped, so YAML's line numbers stay the file's) and ``!!opencv-matrix`` tags, a
+    UTF-8 BOM, CRLF line ends.  Duplicate keys are refused at their line.
+    ``empty_ok``: an empty file is ``{}`` (configs) instead of an error.
+    """
+    path = Path(path)
+    text = yaml_text(path, what)
     try:
-        data = yaml.load("\n".join(lines), Loader=_OpenCVLoader)  # noqa: S506 (a SafeLoader subclass)
+        data = yaml.load(text, Loader=YamlLoader)  # noqa: S506 (a SafeLoader subclass)
     except yaml.YAMLError as err:
-        mark = getattr(err, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark is not None else str(path)
-        problem = " ".join(str(getattr(err, "problem", None) or "syntax error").split())
-        raise DataError(where, f"is not valid YAML ({problem})") from None
+        raise yaml_error(path, err) from None
     if data is None and empty_ok:
         return {}
     if not isinstance(data, dict):
