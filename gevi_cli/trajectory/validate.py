@@ -36,7 +36,9 @@ def absurd_row(positions: np.ndarray) -> tuple[int, float, float] | None:
     * :data:`MAX_STEP_RATIO` (1e4) times the typical step, the lower quartile of the steps (floored at
       1 mm; rates and speeds vary, four orders of magnitude do not happen between consecutive poses;
       a quartile, not the median, because one glitch row makes *two* steps huge, which in a file of
-      four rows is two of its three steps), and
+      four rows is two of its three steps; the pool also holds the two-row skips ``|p[i+1] - p[i-1]|``,
+      which step over a glitch row: in a file of three rows with the middle one corrupt, both steps
+      are huge and only the skip shows the ordinary motion), and
     * :data:`MAX_EXTENT_RATIO` (100) times (1 m + the summed length of all non-jump steps): that sum
       bounds the extent of the rest of the trajectory, so a long drive with a genuine big step
       (a VO reset, a GPS re-fix) is not refused, only a step 100x larger than anything else it covers.
@@ -49,7 +51,8 @@ def absurd_row(positions: np.ndarray) -> tuple[int, float, float] | None:
     if len(positions) < 3:
         return None
     steps = np.linalg.norm(np.diff(positions, axis=0), axis=1)
-    typical = float(np.quantile(steps, 0.25, method="lower"))
+    skips = np.linalg.norm(positions[2:] - positions[:-2], axis=1)
+    typical = float(np.quantile(np.concatenate([steps, skips]), 0.25, method="lower"))
     candidate = (steps > MIN_JUMP_M) & (steps > MAX_STEP_RATIO * max(typical, 1e-3))
     if not candidate.any():
         return None
