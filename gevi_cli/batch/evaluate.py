@@ -115,6 +115,7 @@ def evaluate_batch(specs, baselines, settings, inertial_methods: set) -> BatchRe
                                   T_B_C0=T, gt_raw=raw)
             except GeviError as exc:
                 r = failed(spec.method, spec.sequence, trial, primary, exc.one_line())
+            r.lost = marker["state"] == "lost-tracking"
             bucket.append(r)
             if align == "se3" and spec.trial == 1 and spec.sequence not in out.gts:
                 try:

@@ -61,6 +61,7 @@ class PairResult:
     kitti: KittiResult | None = None
     warnings: list = field(default_factory=list)
     aligned: Trajectory | None = None  # aligned, matched estimate (for plots)
+    lost: bool = False  # the run lost tracking: some of its poses were bridged, not estimated (batch)
 
     @property
     def ok(self) -> bool:

@@ -68,6 +68,7 @@ def build_tables(results, methods, sequences, settings) -> list[Table]:
             v = _num(get(r)) if r.ok else float("nan")
             if r.ok and not math.isnan(v):
                 c.values.append(v)
+                c.n_lost += bool(r.lost)
             elif not r.ok:
                 c.reasons.append(r.reason)
         t = Table(key, f"{title} [{unit}] — {note_align}", list(methods), list(sequences), cells,

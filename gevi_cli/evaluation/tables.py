@@ -28,6 +28,7 @@ class Cell:
     values: list = field(default_factory=list)
     n_trials: int = 0
     reasons: list = field(default_factory=list)
+    n_lost: int = 0  # trials among the values whose run lost tracking (poses partly bridged)
 
     @property
     def n_ok(self) -> int:
@@ -129,14 +130,16 @@ def _cell_text(kind: str, c) -> tuple[str, float]:
     if c.failed:
         return "failed", float("nan")
     failed_note = f" [{c.n_trials - c.n_ok}/{c.n_trials} failed]" if c.n_ok < c.n_trials else ""
+    if c.n_lost:  # a number, but not one of a run that tracked throughout: say so in the cell
+        failed_note += f" [{c.n_lost}/{c.n_trials} lost tracking]" if c.n_trials > 1 else " [lost tracking]"
     if kind == "median":
         if c.n_trials <= 1:
-            return fmt(c.stat("median")), c.stat("median")
+            return fmt(c.stat("median")) + failed_note, c.stat("median")
         return f"{fmt(c.stat('median'))} ({fmt(c.stat('min'))}, {fmt(c.stat('max'))}){failed_note}", c.stat("median")
     if c.n_trials > 1:
         mean = fmt(c.stat("mean"))
         return f"{mean} ± {_fmt_like(c.stat('std'), mean)}{failed_note}", c.stat("mean")
-    return fmt(c.stat("mean")), c.stat("mean")
+    return fmt(c.stat("mean")) + failed_note, c.stat("mean")
 
 
 def _ranks(values: dict) -> dict:

@@ -49,3 +49,12 @@ def test_ties_share_rank_and_single_method_unmarked():
     assert _row(render_markdown(t), "s") == ["s", "**1.000**", "**1.000**"]
     t = Table("x", "X", ["a"], ["s"], {("s", "a"): Cell([1.0], 1)})
     assert _row(render_markdown(t), "s") == ["s", "1.000"]
+
+
+def test_lost_tracking_is_said_in_the_cell():
+    t = _table()
+    t.cells[("s1", "c")] = Cell([3.0], 1, n_lost=1)
+    t.cells[("s2", "a")] = Cell([0.5, 0.7], 2, n_lost=1)
+    md = render_markdown(t)
+    assert _row(md, "s1")[3] == "3.000 [lost tracking]"
+    assert _row(md, "s2")[1] == "_0.6000 ± 0.1414 [1/2 lost tracking]_"  # second after c (0.25)
