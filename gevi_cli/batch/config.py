@@ -50,13 +50,9 @@ class SimSpec:
 
 
 @dataclass(frozen=True)
-class SequenceEntry:
-    """One sequence: a dataset ``path`` or a ``sim`` render, with the `gevi run` input options."""
+class RunInputs:
+    """The `gevi run` input options of a sequence (paths resolved): what every run on it is given."""
 
-    name: str
-    line: int
-    path: str | None = None
-    sim: SimSpec | None = None
     gt: str | None = None
     calib: str | None = None
     imu_calib: str | None = None
@@ -65,6 +61,22 @@ class SequenceEntry:
     topics: str | None = None
     start: int = 0
     max_frames: int | None = None
+
+    def request_kwargs(self) -> dict:
+        """As :class:`~gevi_cli.run.session.RunRequest` fields."""
+        return {"groundtruth": self.gt, "calib": self.calib, "imu_calib": self.imu_calib, "kind": self.kind,
+                "cameras": self.cameras, "topics": self.topics, "start": self.start, "max_frames": self.max_frames}
+
+
+@dataclass(frozen=True)
+class SequenceEntry:
+    """One sequence: a dataset ``path`` or a ``sim`` render, with the `gevi run` input options."""
+
+    name: str
+    line: int
+    path: str | None = None
+    sim: SimSpec | None = None
+    inputs: RunInputs = RunInputs()
     methods: tuple | None = None  # names of the methods run on it (None: all)
     optional: bool = False  # a missing path is skipped with the reason instead of a config error
     seed_per_trial: bool = False  # simulated: trial k is rendered with seed k (scene, motion and noise)
@@ -398,11 +410,13 @@ def _sequences(ctx, node, cfg: BatchConfig) -> list:
             files[key] = str(p)
         sim = _sim(ctx, s["simulate"][1], f"{where}.simulate") if "simulate" in s else None
         out.append(SequenceEntry(
-            name=name, line=item.start_mark.line + 1, path=files.get("path"), sim=sim, gt=files.get("gt"),
-            calib=files.get("calib"), imu_calib=files.get("imu_calib"), kind=ctx.scalar(s, "kind", where, str),
-            cameras=ctx.scalar(s, "cameras", where, str), topics=ctx.scalar(s, "topics", where, str),
-            start=ctx.scalar(s, "start", where, int, 0, lambda v: None if v >= 0 else "must not be negative"),
-            max_frames=ctx.scalar(s, "max_frames", where, int, None, _positive), methods=methods, optional=optional,
+            name=name, line=item.start_mark.line + 1, path=files.get("path"), sim=sim, inputs=RunInputs(
+                gt=files.get("gt"), calib=files.get("calib"), imu_calib=files.get("imu_calib"),
+                kind=ctx.scalar(s, "kind", where, str), cameras=ctx.scalar(s, "cameras", where, str),
+                topics=ctx.scalar(s, "topics", where, str),
+                start=ctx.scalar(s, "start", where, int, 0, lambda v: None if v >= 0 else "must not be negative"),
+                max_frames=ctx.scalar(s, "max_frames", where, int, None, _positive)),
+            methods=methods, optional=optional,
             seed_per_trial=ctx.scalar(s, "seed_per_trial", where, bool, False), skip_reason=skip))
         if out[-1].seed_per_trial and sim is None:
             raise ctx.err(s["seed_per_trial"][1], f"{where}.seed_per_trial", "only for simulate: sequences")

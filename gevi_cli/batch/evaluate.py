@@ -90,7 +90,7 @@ def evaluate_batch(specs, baselines, settings, inertial_methods: set) -> BatchRe
             continue  # never finished: n/a
         st = read_status(spec.run_dir) or {}
         trial = f"trial{spec.trial}"
-        gt_path = spec.gt or spec.source
+        gt_path = spec.inputs.gt or spec.source
         seq_gt_path.setdefault(spec.sequence, gt_path)
         run = {"run_id": spec.run_id, "method": spec.method, "sequence": spec.sequence, "trial": spec.trial,
                "seed": spec.seed, "state": marker["state"], "message": marker.get("message", ""),

@@ -14,7 +14,7 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from gevi_cli.batch.config import BatchConfig, SequenceEntry, SimSpec
+from gevi_cli.batch.config import BatchConfig, RunInputs, SequenceEntry, SimSpec
 from gevi_cli.errors import GeviError
 
 
@@ -32,14 +32,7 @@ class RunSpec:
     params: tuple  # (RunRequest field, value) of the method
     sim: SimSpec | None = None  # the render this run reads (resolved to ``source`` before dispatch)
     source: str | None = None  # dataset path given to `gevi run`
-    gt: str | None = None
-    calib: str | None = None
-    imu_calib: str | None = None
-    kind: str | None = None
-    cameras: str | None = None
-    topics: str | None = None
-    start: int = 0
-    max_frames: int | None = None
+    inputs: RunInputs = RunInputs()
 
     def request(self):
         """The :class:`RunRequest` of this run (what `gevi run` would build from its options)."""
@@ -48,9 +41,8 @@ class RunSpec:
         kw = dict(self.params)
         if "sets" in kw:
             kw["sets"] = tuple(kw["sets"])
-        return RunRequest(sequence=self.source, start=self.start, max_frames=self.max_frames, seed=self.seed,
-                          out=self.run_dir, quiet=True, groundtruth=self.gt, calib=self.calib,
-                          imu_calib=self.imu_calib, kind=self.kind, cameras=self.cameras, topics=self.topics, **kw)
+        return RunRequest(sequence=self.source, seed=self.seed, out=self.run_dir, quiet=True,
+                          **self.inputs.request_kwargs(), **kw)
 
 
 def sim_for_trial(seq: SequenceEntry, trial: int) -> SimSpec | None:
@@ -72,9 +64,7 @@ def expand(cfg: BatchConfig, out: Path) -> list[RunSpec]:
                 rid = f"{m.ident}/{seq.name}/trial{k}"
                 runs.append(RunSpec(run_id=rid, method=m.name, method_id=m.ident, sequence=seq.name, trial=k, seed=k,
                                     run_dir=str(Path(out) / "runs" / rid), params=m.params, sim=sim_for_trial(seq, k),
-                                    source=seq.path, gt=seq.gt, calib=seq.calib, imu_calib=seq.imu_calib,
-                                    kind=seq.kind, cameras=seq.cameras, topics=seq.topics, start=seq.start,
-                                    max_frames=seq.max_frames))
+                                    source=seq.path, inputs=seq.inputs))
     return runs
 
 

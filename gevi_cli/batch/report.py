@@ -172,7 +172,7 @@ def _markdown(cfg, specs, baselines, res, se3, posyaw, runtime, skipped, pngs, r
             if s.seed_per_trial:
                 src += " (seed = trial)"
         else:
-            src = f"`{_short(s.path, cfg.root)}`" + (f", max_frames {s.max_frames}" if s.max_frames else "")
+            src = f"`{_short(s.path, cfg.root)}`" + (f", max_frames {s.inputs.max_frames}" if s.inputs.max_frames else "")
         note = f" — skipped: {s.skip_reason}" if s.skip_reason else ""
         L.append(f"| {s.name} | {src}{note} | {', '.join(s.methods) if s.methods else 'all'} |")
     if cfg.baselines:
