@@ -170,12 +170,15 @@ def _compose(path: Path):
     """The config's YAML nodes (for line numbers), read as every YAML file of the project is read."""
     from gevi_cli.datasets.yamlio import YamlLoader, yaml_error, yaml_text
 
-    text = yaml_text(path, "batch config")
+    loader = YamlLoader(yaml_text(path, "batch config"))
     try:
-        node = yaml.compose(text, Loader=YamlLoader)
-        yaml.load(text, Loader=YamlLoader)  # noqa: S506 (SafeLoader subclass): duplicate keys, at their line
+        node = loader.get_single_node()
+        if node is not None:
+            loader.construct_document(node)  # the constructors refuse duplicate keys, at their line
     except yaml.YAMLError as exc:
         raise yaml_error(path, exc) from None
+    finally:
+        loader.dispose()
     if node is None:
         raise GeviError(path, "is empty; expected methods: and sequences:")
     return node

@@ -10,7 +10,8 @@ from pathlib import Path
 
 from gevi_cli.datasets import bag_streams as streams
 from gevi_cli.datasets.bagfile import bag_root, describe_error, open_reader
-from gevi_cli.datasets.rosbag import choose_gt_topic, choose_imu_topics, find_imu_noise, parse_topics
+from gevi_cli.datasets.rosbag import (check_requested_topics, choose_gt_topic, choose_imu_topics, find_imu_noise,
+                                      parse_topics)
 from gevi_cli.errors import DataError, GeviError, LayoutError
 from gevi_cli.trajectory import read_trajectory
 
@@ -32,13 +33,7 @@ class BagImu:
         reader = open_reader(self.path)
         try:
             available = {name: info.msgtype for name, info in reader.topics.items()}
-            for role, topic in requested.items():
-                if topic is not None and topic not in available:
-                    raise LayoutError(self.path, f"--topics {role}={topic}: no such topic in the bag")
-                types = (streams.IMU_TYPE,) if role != "gt" else streams.POSE_TYPES
-                if topic is not None and available[topic] not in types:
-                    raise LayoutError(self.path, f"--topics {role}={topic}: the topic has type {available[topic]}, "
-                                                 f"expected {' or '.join(types)}")
+            check_requested_topics(self.path, available, requested)
             noise, hint, self.imu_calibration_file = find_imu_noise(self.path, imu_calib)
             self.imu_topics = choose_imu_topics(self.path, available, requested, hint, self.warnings)
             if self.imu_topics is None:

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gevi_cli.datasets.bagfile import stamp_ns
 from gevi_cli.errors import DataError
 
 IMU_TYPE = "sensor_msgs/msg/Imu"
@@ -185,7 +186,7 @@ class TopicSamples:
 
     def add_imu(self, msg, bag_ns: int) -> None:
         w, acc = msg.angular_velocity, msg.linear_acceleration
-        self.header_ns.append(_stamp(msg.header.stamp))
+        self.header_ns.append(stamp_ns(msg.header.stamp))
         self.bag_ns.append(bag_ns)
         self.a.append((w.x, w.y, w.z))
         self.b.append((acc.x, acc.y, acc.z))
@@ -197,7 +198,7 @@ class TopicSamples:
             p, q = msg.pose.position, msg.pose.orientation
         else:  # Odometry, PoseWithCovarianceStamped
             p, q = msg.pose.pose.position, msg.pose.pose.orientation
-        self.header_ns.append(_stamp(msg.header.stamp))
+        self.header_ns.append(stamp_ns(msg.header.stamp))
         self.bag_ns.append(bag_ns)
         self.a.append((p.x, p.y, p.z))
         self.b.append((q.w, q.x, q.y, q.z))
@@ -207,10 +208,6 @@ class TopicSamples:
         b = np.array(self.b, dtype=np.float64)
         return (np.array(self.header_ns, dtype=np.int64), np.array(self.bag_ns, dtype=np.int64),
                 np.array(self.a, dtype=np.float64).reshape(-1, 3), b.reshape(len(self.b), -1) if len(self.b) else b)
-
-
-def _stamp(stamp) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
 def _imu_arrays(where: str, s: TopicSamples, warnings: list[str]):

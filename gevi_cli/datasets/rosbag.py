@@ -255,16 +255,7 @@ class RosbagSequence(Sequence):
         def listing(names):
             return ", ".join(names) if names else "none"
 
-        for role, topic in requested.items():
-            if topic is None:
-                continue
-            if topic not in available:
-                wanted = listing(by_type[role])
-                raise self._bag_error(f"--topics {role}={topic}: no such topic in the bag "
-                                      f"({'image' if role in ('left', 'right') else role} topics: {wanted})")
-            if available[topic] not in ROLES[role]:
-                raise self._bag_error(f"--topics {role}={topic}: the topic has type {available[topic]}, expected "
-                                      f"{' or '.join(ROLES[role])}")
+        check_requested_topics(self.path, available, requested)
 
         chosen: dict[str, str | None] = {}
         for side in ("left", "right"):
@@ -490,6 +481,20 @@ class RosbagSequence(Sequence):
             self.close()
         except Exception:
             pass
+
+
+def check_requested_topics(where, available: dict[str, str], requested: dict) -> None:
+    """Every ``--topics`` role names a topic of the bag with a type of that role, or a one-line error."""
+    for role, topic in requested.items():
+        if topic is None:
+            continue
+        if topic not in available:
+            wanted = ", ".join(sorted(t for t, ty in available.items() if ty in ROLES[role])) or "none"
+            raise LayoutError(where, f"--topics {role}={topic}: no such topic in the bag "
+                                     f"({'image' if role in ('left', 'right') else role} topics: {wanted})")
+        if available[topic] not in ROLES[role]:
+            raise LayoutError(where, f"--topics {role}={topic}: the topic has type {available[topic]}, expected "
+                                     f"{' or '.join(ROLES[role])}")
 
 
 def search_dirs(path: Path) -> list[tuple[Path, str]]:

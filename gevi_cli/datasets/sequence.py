@@ -60,6 +60,10 @@ class ImuData:
                        self.gyro_random_walk, self.acc_noise_density, self.acc_random_walk)
 
 
+#: an IMU interval longer than this many median sample periods is a gap (gevi info, gevi imu, gevi run)
+IMU_GAP_FACTOR = 5.0
+
+
 def rate_hz(t_ns: np.ndarray) -> float:
     """Nominal rate from the median sample period (robust to dropped frames)."""
     if len(t_ns) < 2:
