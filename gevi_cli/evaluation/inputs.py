@@ -256,7 +256,6 @@ def load_T_B_C0(path: Path) -> np.ndarray:
     path = Path(path)
     if not path.is_file():
         raise GeviError("--T-B-C0", f"{path}: no such file")
-    text = path.read_text()
     vals = None
     from gevi_cli.datasets.yamlio import load_yaml, matrix
 
@@ -270,7 +269,7 @@ def load_T_B_C0(path: Path) -> np.ndarray:
             raise GeviError(path, "expected a key T_B_C0 (or T_BS) holding a 4x4 matrix")
     else:
         try:
-            vals = np.array([float(x) for x in re.split(r"[\s,;\[\]]+", text) if x], dtype=np.float64)
+            vals = np.array([float(x) for x in re.split(r"[\s,;\[\]]+", path.read_text()) if x], dtype=np.float64)
         except ValueError:
             raise GeviError(path, "expected 16 (or 12) numbers of a 4x4 cam0->body transform") from None
     if vals.size == 12:
