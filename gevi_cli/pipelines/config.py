@@ -153,6 +153,11 @@ class FusionConfig:
     sigma_memory_s: float = opt(2.0, "conjugate prior of the gravity-prior covariance from the innovations (specific "
                                      "force against the gyro-predicted tilt) of the last this many seconds, weighted "
                                      "as that many residuals [PROPOSAL, spec 8.3]; 0: window residuals only")
+    acc_window_s: float = opt(0.4, "acceleration compensation [PROPOSAL]: the gravity residual removes the body "
+                                   "acceleration fitted to the visually tracked positions of the last this many "
+                                   "seconds from the specific force; 0: the paper's model (specific force only)")
+    acc_order: int = opt(3, "degree of that position fit (2: the window's mean acceleration; 3: extrapolated to the "
+                            "frame)")
 
 
 @dataclass

@@ -44,6 +44,7 @@ from gevi_cli.pipelines.config import OdometryConfig
 from gevi_cli.pipelines.inertial_init import (GEVI, INIT, STANDSTILL, VISUAL, FrameSample, InertialInitialisation,
                                               tilt_of, yaw_of)
 from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches, _make_T
+from gevi_cli.pipelines.recent_motion import RecentMotion
 from gevi_cli.pipelines.pose6 import opencv_pnp, reprojection_median_px, tracked_pose6
 from gevi_cli.pipelines.types import INERTIAL, OK
 from gevi_cli.pipelines.verification import FivePointL1Verification, ThreePointVerification, TrackingFailure
@@ -97,7 +98,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         self.innovations: list[tuple[int, np.ndarray]] = []  # (t_ns, a_dir - R_tilt(pred)^T e3) for Sigma's prior
         self.bias_poses: list[tuple[int, np.ndarray]] = []  # (t_ns, T_w_c) after the standstill, for b_a
         self.v_W = np.zeros(3)  # body velocity in W (m/s): from the visual track, carried by the IMU over losses
-        self.track_hist: list[tuple[int, np.ndarray]] = []  # (t_ns, body position in W) of recent OK frames
+        self.motion = RecentMotion(cfg.fusion.acc_window_s, cfg.fusion.acc_order)  # recent visually tracked body positions
 
     # --------------------------------------------------------------------------------- helpers
     def _levelling(self):
@@ -107,14 +108,30 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
     def _verify(self, z, q, p, seed):
         return (self.gevi_verify if self.mode == GEVI else self.six_verify)(z, q, p, seed)
 
-    def _acc_dir(self, t_ns: int) -> np.ndarray:
-        """Unit specific force (accelerometer bias removed) over a frame period centred on ``t_ns``."""
+    def _f_mean(self, t_ns: int) -> np.ndarray:
+        """Mean specific force (m/s^2, body) over a frame period centred on ``t_ns`` (NaN: no samples)."""
         h = int(0.5 * self.frame_period * 1e9)
         _, _, a = self.imu.window(t_ns - h, t_ns + h)
-        if len(a) == 0:
-            return np.full(3, np.nan)
-        a = a.mean(0) - self.b_a
+        return a.mean(0) if len(a) else np.full(3, np.nan)
+
+    def _acc_dir(self, t_ns: int, f_mean: np.ndarray, R_wb: np.ndarray | None = None) -> np.ndarray:
+        """Unit specific force at ``t_ns``, accelerometer bias removed and, given the body orientation
+        ``R_wb``, the visually tracked body acceleration too: the gravity direction alone
+        (``-R_wb^T g_W / g``)."""
+        a = f_mean - self.b_a
+        if R_wb is not None:
+            a = a - R_wb.T @ self.motion.acceleration(t_ns)
         return a / np.linalg.norm(a)
+
+    def _refresh_acc_dirs(self) -> None:
+        """Re-read the acceleration of the BCD window's frames whose fit window has not yet slid to
+        centred: the frames tracked since make it a smoother, unlagged estimate."""
+        if self.motion.acc_window_ns <= 0 or not self.motion.t:
+            return
+        now = self.motion.t[-1]
+        for s in self.win:
+            if s.R_wb is not None and now - s.t_ns <= self.motion.acc_window_ns // 2 + int(self.frame_period * 1e9):
+                s.acc_dir = self._acc_dir(s.t_ns, s.f_mean, s.R_wb)
 
     def _sample(self, index: int, t_ns: int, t_prev_ns: int | None) -> FrameSample:
         """IMU summary of frame ``index`` at ``t_ns`` (the gyro rotation since ``t_prev_ns``, NaN over a
@@ -125,7 +142,11 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
             rotvec, dt = fi.rotvec, (t_ns - t_prev_ns) * 1e-9
             if fi.gap:
                 rotvec = np.full(3, np.nan)
-        return FrameSample(index, t_ns, t_prev_ns, self._acc_dir(t_ns), rotvec, dt, np.zeros(2))
+        R_wb = None  # the orientation predicted from the last pose by the gyro (its tilt error is second order here)
+        if self.phase != INIT and self.T_w_last is not None and np.all(np.isfinite(rotvec)):
+            R_wb = self.T_w_last[:3, :3] @ self.R_ic.T @ est.exp_so3(rotvec)
+        f = self._f_mean(t_ns)
+        return FrameSample(index, t_ns, t_prev_ns, self._acc_dir(t_ns, f, R_wb), rotvec, dt, np.zeros(2), f, R_wb)
 
     # ------------------------------------------------------------------------------ main entry
     def track(self, frame):
@@ -167,6 +188,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
                 self.v_W = np.zeros(3)
             elif res.status != INERTIAL:
                 self._update_velocity(res)
+                self._refresh_acc_dirs()
             self._refine_acc_bias(res)
         self.cur.tilt = self.tilt.copy()
         if res.keyframe or self.kf is None:
@@ -201,16 +223,13 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
     def _update_velocity(self, res) -> None:
         """Velocity from a line fit to the body positions of the last ~0.5 s of tracked frames."""
         if res.status != OK:
-            self.track_hist = []
+            self.motion.reset()
             return
         T_B_C = np.asarray(self.camera.T_B_C0, dtype=float)
-        p = (res.T_w_c @ np.linalg.inv(T_B_C))[:3, 3]
-        self.track_hist = [h for h in self.track_hist if res.t_ns - h[0] <= 5e8] + [(res.t_ns, p)]
-        if len(self.track_hist) >= 3 and (self.track_hist[-1][0] - self.track_hist[0][0]) >= 1.5e8:
-            t = np.array([h[0] for h in self.track_hist], dtype=np.float64) * 1e-9
-            P = np.array([h[1] for h in self.track_hist])
-            tc = t - t.mean()
-            self.v_W = (tc @ (P - P.mean(0))) / (tc @ tc)
+        self.motion.add(res.t_ns, (res.T_w_c @ np.linalg.inv(T_B_C))[:3, 3])
+        v = self.motion.velocity()
+        if v is not None:
+            self.v_W = v
 
     def _note_gap(self, res, gap: bool) -> None:
         if not gap or self.phase == INIT:

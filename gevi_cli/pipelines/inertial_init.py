@@ -31,6 +31,8 @@ class FrameSample:
     rotvec: np.ndarray
     dt: float
     tilt: np.ndarray
+    f_mean: np.ndarray | None = None  # mean specific force over the frame period, as measured (m/s^2)
+    R_wb: np.ndarray | None = None  # body orientation the acceleration compensation used (None: none)
 
 
 def tilt_of(R_wc: np.ndarray, R_ic: np.ndarray) -> np.ndarray:

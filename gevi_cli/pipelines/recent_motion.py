@@ -1,0 +1,80 @@
+"""The recent visually tracked motion of the body: velocity and acceleration in W from positions.
+
+GeVI keeps the body positions (metres, in the gravity-aligned world W) of its last visually tracked
+frames.  Two things are read from them:
+
+* the velocity (m/s) that the IMU carries on over frames vision cannot track: a line fit over the
+  last 0.5 s;
+* the body acceleration ``a_W`` (m/s^2) that the gravity residual of the BCD refinement removes from
+  the specific force (docs/method.md, "acceleration compensation", [PROPOSAL]): a least-squares
+  polynomial fit over the last ``window_s`` evaluated at the frame being tracked.
+
+Stereo gives metric positions, so the acceleration comes without the tilt: a tilt error ``d`` changes
+``a_W`` by ``d x a_W``, second order, while the specific force itself is off by ``a / g`` rad.  The
+history restarts whenever a frame is not tracked visually: IMU-carried positions would feed the tilt
+back into the estimate of its own correction.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+VELOCITY_WINDOW_NS = 500_000_000
+MIN_VELOCITY_SPAN_NS = 150_000_000
+
+
+class RecentMotion:
+    """Body positions ``p_W`` (m) at stamps ``t_ns`` of the last visually tracked frames."""
+
+    def __init__(self, acc_window_s: float, acc_order: int = 2):
+        self.acc_window_ns = int(acc_window_s * 1e9)
+        self.acc_order = int(acc_order)
+        self.keep_ns = max(VELOCITY_WINDOW_NS, self.acc_window_ns)
+        self.t: list[int] = []
+        self.p: list[np.ndarray] = []
+
+    def reset(self) -> None:
+        self.t, self.p = [], []
+
+    def add(self, t_ns: int, p_W: np.ndarray) -> None:
+        keep = [k for k, t in enumerate(self.t) if t_ns - t <= self.keep_ns]
+        self.t = [self.t[k] for k in keep] + [int(t_ns)]
+        self.p = [self.p[k] for k in keep] + [np.asarray(p_W, dtype=float)]
+
+    def _since(self, t_ns: int, span_ns: int) -> tuple[np.ndarray, np.ndarray]:
+        t = np.array(self.t, dtype=np.int64)
+        sel = t_ns - t <= span_ns
+        return (t[sel] - t_ns) * 1e-9, np.array(self.p)[sel] if sel.any() else np.zeros((0, 3))
+
+    def velocity(self) -> np.ndarray | None:
+        """Line-fit velocity over the last 0.5 s (m/s), or None with less than 3 frames over 0.15 s."""
+        if not self.t:
+            return None
+        tau, P = self._since(self.t[-1], VELOCITY_WINDOW_NS)
+        if len(tau) < 3 or tau[-1] - tau[0] < MIN_VELOCITY_SPAN_NS * 1e-9:
+            return None
+        tc = tau - tau.mean()
+        return (tc @ (P - P.mean(0))) / (tc @ tc)
+
+    def acceleration(self, t_ns: int) -> np.ndarray:
+        """Acceleration at ``t_ns`` (m/s^2, W) from a polynomial of degree ``acc_order`` fitted to the
+        positions over ``acc_window_s``: the window ends at ``t_ns`` for the frame being tracked and
+        slides forward, up to centred on ``t_ns``, as later frames are known (a frame of the BCD window
+        is re-read each frame).  Zero until the window holds ``acc_order + 3`` frames over at least 60 %
+        of its length (a standstill start begins at rest).
+
+        With time measured from ``t_ns`` the acceleration there is twice the quadratic coefficient,
+        whatever the degree: degree 2 gives the window's mean acceleration (a lag of half the window
+        when it ends at ``t_ns``), degree 3 extrapolates its trend at a higher noise."""
+        W = self.acc_window_ns
+        if W <= 0 or not self.t:
+            return np.zeros(3)
+        t = np.array(self.t, dtype=np.int64)
+        ahead = min(max(int(t[-1]) - int(t_ns), 0), W // 2)
+        sel = (t >= t_ns - W + ahead) & (t <= t_ns + ahead)
+        tau = (t[sel] - t_ns) * 1e-9
+        if len(tau) < self.acc_order + 3 or tau[-1] - tau[0] < 0.6 * W * 1e-9:
+            return np.zeros(3)
+        P = np.array(self.p)[sel]
+        V = np.vander(tau, self.acc_order + 1, increasing=True)
+        coef, *_ = np.linalg.lstsq(V, P - P[-1], rcond=None)
+        return 2.0 * coef[2]
