@@ -156,7 +156,7 @@ class FusionConfig:
     acc_window_s: float = opt(0.4, "acceleration compensation [PROPOSAL]: the gravity residual removes the body "
                                    "acceleration fitted to the visually tracked positions of the last this many "
                                    "seconds from the specific force; 0: the paper's model (specific force only)")
-    acc_order: int = opt(3, "degree of that position fit (2: the window's mean acceleration; 3: extrapolated to the "
+    acc_order: int = opt(2, "degree of that position fit (2: the window's mean acceleration; 3: extrapolated to the "
                             "frame)")
 
 

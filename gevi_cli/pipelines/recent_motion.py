@@ -20,6 +20,7 @@ import numpy as np
 
 VELOCITY_WINDOW_NS = 500_000_000
 MIN_VELOCITY_SPAN_NS = 150_000_000
+POWER_WINDOW_NS = 2_000_000_000
 
 
 class RecentMotion:
@@ -31,6 +32,7 @@ class RecentMotion:
         self.keep_ns = max(VELOCITY_WINDOW_NS, self.acc_window_ns)
         self.t: list[int] = []
         self.p: list[np.ndarray] = []
+        self.power: list[tuple[int, float]] = []  # (t_ns, |a|^2 / 3 - var(a)) of recent estimates
 
     def reset(self) -> None:
         self.t, self.p = [], []
@@ -56,15 +58,19 @@ class RecentMotion:
         return (tc @ (P - P.mean(0))) / (tc @ tc)
 
     def acceleration(self, t_ns: int) -> np.ndarray:
-        """Acceleration at ``t_ns`` (m/s^2, W) from a polynomial of degree ``acc_order`` fitted to the
-        positions over ``acc_window_s``: the window ends at ``t_ns`` for the frame being tracked and
-        slides forward, up to centred on ``t_ns``, as later frames are known (a frame of the BCD window
-        is re-read each frame).  Zero until the window holds ``acc_order + 3`` frames over at least 60 %
-        of its length (a standstill start begins at rest).
+        """Acceleration at ``t_ns`` (m/s^2, W) from the positions over ``acc_window_s``: the window ends
+        at ``t_ns`` for the frame being tracked and slides forward, up to centred on ``t_ns``, as later
+        frames are known (a frame of the BCD window is re-read each frame).  Zero until the window holds
+        ``acc_order + 3`` frames over at least 60 % of its length (a standstill start begins at rest).
 
-        With time measured from ``t_ns`` the acceleration there is twice the quadratic coefficient,
-        whatever the degree: degree 2 gives the window's mean acceleration (a lag of half the window
-        when it ends at ``t_ns``), degree 3 extrapolates its trend at a higher noise."""
+        A polynomial of degree ``acc_order`` is fitted by least squares; with time measured from
+        ``t_ns`` the acceleration there is twice its quadratic coefficient, whatever the degree: degree
+        2 gives the window's mean acceleration (a lag of half the window when it ends at ``t_ns``),
+        degree 3 extrapolates its trend at a higher noise.  The estimate is then shrunk toward zero by
+        the Wiener gain ``S / (S + var)``: ``var`` from the fit's residuals, ``S`` the recent signal
+        power.  Where the tracked positions are noisy (a turbid floor, ~2 mm per frame) the second
+        derivative is mostly noise; measured on pool-hard_s2 (60 s), the unshrunk degree-3 estimate was
+        off by 0.1-0.9 m/s^2 RMS per 5 s against 0.06-0.57 m/s^2 of true acceleration."""
         W = self.acc_window_ns
         if W <= 0 or not self.t:
             return np.zeros(3)
@@ -72,9 +78,16 @@ class RecentMotion:
         ahead = min(max(int(t[-1]) - int(t_ns), 0), W // 2)
         sel = (t >= t_ns - W + ahead) & (t <= t_ns + ahead)
         tau = (t[sel] - t_ns) * 1e-9
-        if len(tau) < self.acc_order + 3 or tau[-1] - tau[0] < 0.6 * W * 1e-9:
+        dof = len(tau) - self.acc_order - 1
+        if dof < 2 or tau[-1] - tau[0] < 0.6 * W * 1e-9:
             return np.zeros(3)
         P = np.array(self.p)[sel]
         V = np.vander(tau, self.acc_order + 1, increasing=True)
-        coef, *_ = np.linalg.lstsq(V, P - P[-1], rcond=None)
-        return 2.0 * coef[2]
+        coef, rss, *_ = np.linalg.lstsq(V, P - P[-1], rcond=None)
+        if len(rss) == 0:
+            return np.zeros(3)
+        a = 2.0 * coef[2]
+        var_a = 4.0 * float(np.sum(rss)) / (3 * dof) * float(np.linalg.inv(V.T @ V)[2, 2])
+        self.power = [x for x in self.power if t_ns - x[0] <= POWER_WINDOW_NS] + [(int(t_ns), float(a @ a) / 3 - var_a)]
+        S = max(float(np.mean([x[1] for x in self.power])), 0.0)
+        return a * (S / (S + var_a)) if S + var_a > 0 else np.zeros(3)
