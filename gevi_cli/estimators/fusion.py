@@ -207,32 +207,56 @@ class _Problem:
         self.nv, self.ng, self.nc = 2 * n, 3 * self.K, 2 * (self.K - 1)
         self.dim = 4 + 2 * self.K
         self._last = None  # (x, Sigma-free parts) of the last evaluation with a Jacobian
+        # structured normal equations: the lower-triangular whitening factors, and flat indices into H of
+        # the visual 8x8 block (psi, t, tilt_1, tilt_K) and of the 2x2 tilt blocks (diagonal, chain links)
+        self.W00, self.W10, self.W11 = Wvis[:, 0, 0], Wvis[:, 1, 0], Wvis[:, 1, 1]
+        d, K = self.dim, self.K
+        cols = np.r_[0:6, d - 2, d - 1]
+        self.idx_vis = (cols[:, None] * d + cols[None, :]).ravel()
+        blk = 4 + 2 * np.arange(K)[:, None, None] + np.arange(2)[None, :, None]  # (K, 2, 1) rows of tilt k
+        self.idx_diag = (blk * d + np.swapaxes(blk, 1, 2)).ravel()
+        self.idx_up = (blk[:-1] * d + np.swapaxes(blk[1:], 1, 2)).ravel()  # block (k, k+1)
+        self.idx_lo = (blk[1:] * d + np.swapaxes(blk[:-1], 1, 2)).ravel()  # block (k+1, k)
+        self.Hp = self.Wp.T @ self.Wp  # prior block of H (tilt_1, tilt_1)
 
     def unpack(self, x):
         return x[0], x[1:4], x[4:].reshape(self.K, 2)
 
-    def vis(self, x, jac=True):
-        psi, t, T = self.unpack(x)
+    def _vis_residual(self, psi, t, T):
+        """Whitened visual residuals (n, 2) and the intermediates of their Jacobian; None if a point is
+        behind the current camera."""
         w = self.w
         B1, BK, Z = rtilt(*T[0]), rtilt(*T[-1]), rot_z(psi)
-        Ric = w.R_ic
-        M = Ric.T @ BK.T @ Z @ B1  # X = a @ M^T + t
+        M = w.R_ic.T @ BK.T @ Z @ B1  # X = a @ M^T + t
         X = self.a @ M.T + t
         if np.any(X[:, 2] <= 0):
-            return None, None
+            return None
         r = w.q - project(X)
-        rw = np.einsum("nij,nj->ni", self.Wvis, r)
-        if not jac:
-            return rw.ravel(), None
+        return np.einsum("nij,nj->ni", self.Wvis, r), X, B1, BK, Z
+
+    def _vis_mats(self, psi, T, B1, BK, Z):
+        """d M / d (psi, phi_1, theta_1, phi_K, theta_K) (5 matrices, M = R_IC^T B_K^T Rz(psi) B_1)."""
+        Ric = self.w.R_ic
         d1p, d1t = _drtilt(*T[0])
         dKp, dKt = _drtilt(*T[-1])
-        mats = (
+        return (
             Ric.T @ BK.T @ drot_z(psi) @ B1,
             Ric.T @ BK.T @ Z @ d1p,
             Ric.T @ BK.T @ Z @ d1t,
             Ric.T @ dKp.T @ Z @ B1,
             Ric.T @ dKt.T @ Z @ B1,
         )
+
+    def vis(self, x, jac=True):
+        """Dense reference: whitened visual residuals (2n,) [and their (2n, dim) Jacobian]."""
+        psi, t, T = self.unpack(x)
+        res = self._vis_residual(psi, t, T)
+        if res is None:
+            return None, None
+        rw, X, B1, BK, Z = res
+        if not jac:
+            return rw.ravel(), None
+        mats = self._vis_mats(psi, T, B1, BK, Z)
         dX = np.stack([self.a @ Mj.T for Mj in mats], axis=2)  # (n, 3, 5)
         P = project_jacobian(X)  # (n, 2, 3)
         WP = -self.Wvis @ P  # d rw / d X
@@ -249,11 +273,16 @@ class _Problem:
         g, dgp, dgt = _gravity_dir(T)
         return self.w.acc_dir - g, g, dgp, dgt
 
-    def chain(self, T, g, dgp, dgt, jac=True):
+    def _chain_residual(self, T, g):
+        """Whitened gyro-chain residuals (K-1, 2) and m_k = dR_k^T g_k (K-1, 3)."""
         m = np.einsum("kji,kj->ki", self.dR, g[:-1])  # dR_k^T g_k
         roll = np.arctan2(m[:, 1], m[:, 2])
         pitch = -np.arcsin(np.clip(m[:, 0], -1.0, 1.0))
-        r = np.column_stack([wrap_angle(T[1:, 0] - roll), T[1:, 1] - pitch]) * self.Wg[:, None]
+        return np.column_stack([wrap_angle(T[1:, 0] - roll), T[1:, 1] - pitch]) * self.Wg[:, None], m
+
+    def chain(self, T, g, dgp, dgt, jac=True):
+        """Dense reference: whitened gyro-chain residuals [and their (2(K-1), dim) Jacobian]."""
+        r, m = self._chain_residual(T, g)
         if not jac:
             return r.ravel(), None
         Km = self.K - 1
@@ -274,7 +303,8 @@ class _Problem:
     def evaluate(self, x, Lsig_inv, jac=True):
         """Stacked whitened residuals (vis, gravity, chain, prior) [and Jacobian]; None if invalid.
 
-        Only the gravity block depends on Sigma: the parts of the last state evaluated with a Jacobian
+        The dense reference of :meth:`at` / :meth:`residual` / :meth:`normal` (which :func:`bcd_refine`
+        uses). Only the gravity block depends on Sigma: the parts of the last state evaluated with a Jacobian
         are kept, so the Sigma-step's re-evaluation at an unchanged state costs just the re-whitening."""
         if jac and self._last is not None and np.array_equal(self._last[0], x):
             rv, Jv, ri, dgp, dgt, rc, Jc, rp = self._last[1:]
@@ -285,7 +315,7 @@ class _Problem:
             _, _, T = self.unpack(x)
             ri, g, dgp, dgt = self.imu_raw(x)
             rc, Jc = self.chain(T, g, dgp, dgt, jac)
-            rp = self.Wp @ np.array([wrap_angle(T[0, 0] - self.w.prior_mean[0]), T[0, 1] - self.w.prior_mean[1]])
+            rp = self._prior_residual(T)
             if jac:
                 self._last = (x.copy(), rv, Jv, ri, dgp, dgt, rc, Jc, rp)
         r = np.concatenate([rv, (ri @ Lsig_inv.T).ravel(), rc, rp])
@@ -299,6 +329,104 @@ class _Problem:
         Jp[:, 4:6] = self.Wp
         J = np.concatenate([Jv, Ji.reshape(-1, self.dim), Jc, Jp])
         return r, ri, J
+
+    def _prior_residual(self, T):
+        return self.Wp @ np.array([wrap_angle(T[0, 0] - self.w.prior_mean[0]), T[0, 1] - self.w.prior_mean[1]])
+
+    # --- structured path: the same residuals, normal equations assembled from the Jacobian's blocks
+
+    def at(self, x):
+        """The Sigma-free residuals at state ``x`` (a :class:`_Point`; its Jacobian parts are formed on
+        demand by :meth:`normal`), or None if a point is behind the current camera."""
+        psi, t, T = self.unpack(x)
+        res = self._vis_residual(psi, t, T)
+        if res is None:
+            return None
+        rv, X, B1, BK, Z = res
+        ri, g, dgp, dgt = self.imu_raw(x)
+        rc, m = self._chain_residual(T, g)
+        return _Point(x, rv.ravel(), ri, dgp, dgt, rc.ravel(), self._prior_residual(T), (X, B1, BK, Z), m)
+
+    def residual(self, pt, Lsig_inv):
+        """Stacked whitened residual vector (vis, gravity, chain, prior), as :meth:`evaluate`."""
+        return np.concatenate([pt.rv, (pt.ri @ Lsig_inv.T).ravel(), pt.rc, pt.rp])
+
+    def normal(self, pt, Lsig_inv):
+        """Gauss-Newton normal equations (H = J^T J, g = J^T r) at ``pt`` for Sigma_imu = L L^T.
+
+        Assembled from the blocks of J: the visual rows touch only psi, t, tilt_1, tilt_K (an 8x8
+        normal matrix), the gravity rows of sample k only tilt k (2x2 blocks), a chain link tilts k and
+        k+1 (block-tridiagonal), the prior tilt_1. The Sigma-free part is kept in ``pt``."""
+        if pt.H0 is None:
+            pt.H0, pt.g0 = self._normal_free(pt)
+        L3 = pt.D @ Lsig_inv.T  # (K, 2, 3): whitened d g_k / d (phi_k, theta_k), up to the sign
+        rg = pt.ri @ Lsig_inv.T
+        H = pt.H0.copy()
+        H.ravel()[self.idx_diag] += (L3 @ np.swapaxes(L3, 1, 2)).ravel()
+        g = pt.g0.copy()
+        g[4:] -= np.einsum("kcj,kj->kc", L3, rg).ravel()
+        return H, g
+
+    def _normal_free(self, pt):
+        """H and g of the visual, chain and prior rows (everything but the gravity rows)."""
+        psi, t, T = self.unpack(pt.x)
+        X, B1, BK, Z = pt.vis
+        n, d, K = len(X), self.dim, self.K
+        # visual: d X / d (psi, t, phi_1, theta_1, phi_K, theta_K) as (n, 8, 3)
+        Mc = np.stack(self._vis_mats(psi, T, B1, BK, Z)).transpose(2, 0, 1).reshape(3, 15)
+        dX = np.empty((n, 8, 3))
+        dX[:, 1:4] = np.eye(3)
+        dR = (self.a @ Mc).reshape(n, 5, 3)
+        dX[:, 0] = dR[:, 0]
+        dX[:, 4:] = dR[:, 1:]
+        iz = 1.0 / X[:, 2:3]
+        du = (dX[:, :, 0] - (X[:, 0:1] * iz) * dX[:, :, 2]) * iz  # d pi / d param (n, 8), both rows
+        dv = (dX[:, :, 1] - (X[:, 1:2] * iz) * dX[:, :, 2]) * iz
+        Jv = np.empty((n, 2, 8))  # d rw / d param = -W dpi (W lower triangular)
+        Jv[:, 0] = -self.W00[:, None] * du
+        Jv[:, 1] = -(self.W10[:, None] * du + self.W11[:, None] * dv)
+        Jv = Jv.reshape(2 * n, 8)
+        H = np.zeros((d, d))
+        Hf = H.ravel()
+        Hf[self.idx_vis] = (Jv.T @ Jv).ravel()
+        g = np.zeros(d)
+        g[np.r_[0:6, d - 2, d - 1]] = Jv.T @ pt.rv
+        # chain link k: A_k on tilt k, Wg_k I on tilt k+1
+        m = pt.m
+        h = m[:, 1] ** 2 + m[:, 2] ** 2
+        dm = pt.D[:-1] @ self.dR  # (K-1, 2, 3): d m_k / d (phi_k, theta_k), one row per angle
+        Wg = self.Wg[:, None]
+        A = np.empty((K - 1, 2, 2))
+        A[:, 0] = -Wg * (m[:, 2:3] * dm[:, :, 1] - m[:, 1:2] * dm[:, :, 2]) / h[:, None]
+        A[:, 1] = Wg * dm[:, :, 0] / np.sqrt(np.maximum(1.0 - m[:, 0:1] ** 2, 1e-300))
+        rc = pt.rc.reshape(K - 1, 2)
+        AT = np.swapaxes(A, 1, 2)
+        Dg = np.zeros((K, 2, 2))
+        Dg[:-1] = AT @ A
+        Dg[1:, 0, 0] += self.Wg ** 2
+        Dg[1:, 1, 1] += self.Wg ** 2
+        Dg[0] += self.Hp
+        O = AT * Wg[:, :, None]
+        Hf[self.idx_diag] += Dg.ravel()
+        Hf[self.idx_up] += O.ravel()  # (+=: with K = 2 the visual tilt_1 / tilt_K block is this one)
+        Hf[self.idx_lo] += np.swapaxes(O, 1, 2).ravel()
+        gt = np.zeros((K, 2))
+        gt[:-1] = np.einsum("kji,kj->ki", A, rc)
+        gt[1:] += Wg * rc
+        gt[0] += self.Wp.T @ pt.rp
+        g[4:] += gt.ravel()
+        return H, g
+
+
+class _Point:
+    """Sigma-free residual parts of one state (see :meth:`_Problem.at`)."""
+
+    __slots__ = ("x", "rv", "ri", "D", "rc", "rp", "vis", "m", "H0", "g0")
+
+    def __init__(self, x, rv, ri, dgp, dgt, rc, rp, vis, m):
+        self.x, self.rv, self.ri, self.rc, self.rp, self.vis, self.m = x, rv, ri, rc, rp, vis, m
+        self.D = np.stack([dgp, dgt], axis=1)  # (K, 2, 3) d g_k / d (phi_k, theta_k)
+        self.H0 = self.g0 = None
 
 
 def _vis_covariance(w: FusionWindow, x0):
@@ -376,9 +504,10 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
     prob = _Problem(w, _chol2_inv(_vis_covariance(w, x)))
     Sigma = w.lo * np.eye(3)
     Linv, c_sig = _sigma_parts(Sigma, w)
-    r, ri, J = prob.evaluate(x, Linv)
-    if r is None:
+    pt = prob.at(x)
+    if pt is None:
         raise DegenerateInput("bcd_refine: invalid initial estimate")
+    r = prob.residual(pt, Linv)
     cost = float(r @ r) + c_sig
     scatter = None if w.sigma_prior is None else w.sigma_prior * w.sigma_prior_dof
     hist = [cost]
@@ -387,8 +516,7 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
         start = cost
         # chi-step: LM with Sigma fixed, accept only decreases
         for _ in range(lm_iters):
-            H = J.T @ J
-            gvec = J.T @ r
+            H, gvec = prob.normal(pt, Linv)
             dH = np.diag(H).copy()
             accepted = False
             for _ in range(10):
@@ -397,12 +525,12 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
                 except np.linalg.LinAlgError:
                     mu *= 10.0
                     continue
-                xn = x + d
-                rn, rin, Jn = prob.evaluate(xn, Linv)
-                if rn is not None:
+                ptn = prob.at(pt.x + d)
+                if ptn is not None:
+                    rn = prob.residual(ptn, Linv)
                     cn = float(rn @ rn) + c_sig
                     if cn < cost:
-                        x, r, ri, J, cost = xn, rn, rin, Jn, cn
+                        pt, r, cost = ptn, rn, cn
                         mu = max(mu / 10.0, 1e-12)
                         accepted = True
                         break
@@ -413,16 +541,17 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
         if adaptive:
             # exact block minimiser; a recomputed cost above the old one can only be rounding
             # (same Sigma up to 1e-16), in which case the old Sigma is kept
-            Sig_n = sigma_step(ri, w.lo, w.hi, scatter, w.sigma_prior_dof)
+            Sig_n = sigma_step(pt.ri, w.lo, w.hi, scatter, w.sigma_prior_dof)
             Linv_n, c_sig_n = _sigma_parts(Sig_n, w)
-            r_n, ri_n, J_n = prob.evaluate(x, Linv_n)
+            r_n = prob.residual(pt, Linv_n)  # only the gravity rows depend on Sigma
             c_n = float(r_n @ r_n) + c_sig_n
             if c_n <= cost:
-                Sigma, Linv, c_sig, r, ri, J, cost = Sig_n, Linv_n, c_sig_n, r_n, ri_n, J_n, c_n
+                Sigma, Linv, c_sig, r, cost = Sig_n, Linv_n, c_sig_n, r_n, c_n
             hist.append(cost)
         if start - cost < rel_tol * abs(start):
             break
-    H = J.T @ J
+    x = pt.x
+    H, _ = prob.normal(pt, Linv)
     try:
         C = np.linalg.inv(H)
         cov_last = C[-2:, -2:].copy()
