@@ -212,7 +212,11 @@ class _Problem:
         self.W00, self.W10, self.W11 = Wvis[:, 0, 0], Wvis[:, 1, 0], Wvis[:, 1, 1]
         d, K = self.dim, self.K
         cols = np.r_[0:6, d - 2, d - 1]
-        self.idx_vis = (cols[:, None] * d + cols[None, :]).ravel()
+        self.cols_vis, self.idx_vis = cols, (cols[:, None] * d + cols[None, :]).ravel()
+        self.a1 = np.column_stack([self.a, np.ones(n)])  # homogeneous: d X / d t from the same product
+        self._Mc = np.zeros((4, 24))  # [a, 1] @ Mc = d X / d (psi, t, tilt_1, tilt_K), (n, 8 x 3)
+        self._Mc[3, 3:12] = np.eye(3).ravel()
+        self._Av = np.empty((2 * n, 8))  # work array of the visual Jacobian
         blk = 4 + 2 * np.arange(K)[:, None, None] + np.arange(2)[None, :, None]  # (K, 2, 1) rows of tilt k
         self.idx_diag = (blk * d + np.swapaxes(blk, 1, 2)).ravel()
         self.idx_up = (blk[:-1] * d + np.swapaxes(blk[1:], 1, 2)).ravel()  # block (k, k+1)
@@ -227,12 +231,14 @@ class _Problem:
         behind the current camera."""
         w = self.w
         B1, BK, Z = rtilt(*T[0]), rtilt(*T[-1]), rot_z(psi)
-        M = w.R_ic.T @ BK.T @ Z @ B1  # X = a @ M^T + t
+        P = w.R_ic.T @ BK.T
+        PZ = P @ Z
+        M = PZ @ B1  # X = a @ M^T + t
         X = self.a @ M.T + t
         if np.any(X[:, 2] <= 0):
             return None
-        r = w.q - project(X)
-        return np.einsum("nij,nj->ni", self.Wvis, r), X, B1, BK, Z
+        u = project(X)
+        return np.einsum("nij,nj->ni", self.Wvis, w.q - u), X, u, B1, BK, Z, P, PZ, M
 
     def _vis_mats(self, psi, T, B1, BK, Z):
         """d M / d (psi, phi_1, theta_1, phi_K, theta_K) (5 matrices, M = R_IC^T B_K^T Rz(psi) B_1)."""
@@ -253,7 +259,7 @@ class _Problem:
         res = self._vis_residual(psi, t, T)
         if res is None:
             return None, None
-        rw, X, B1, BK, Z = res
+        rw, X, _, B1, BK, Z = res[:6]
         if not jac:
             return rw.ravel(), None
         mats = self._vis_mats(psi, T, B1, BK, Z)
@@ -342,10 +348,9 @@ class _Problem:
         res = self._vis_residual(psi, t, T)
         if res is None:
             return None
-        rv, X, B1, BK, Z = res
         ri, g, dgp, dgt = self.imu_raw(x)
         rc, m = self._chain_residual(T, g)
-        return _Point(x, rv.ravel(), ri, dgp, dgt, rc.ravel(), self._prior_residual(T), (X, B1, BK, Z), m)
+        return _Point(x, res[0].ravel(), ri, dgp, dgt, rc.ravel(), self._prior_residual(T), res[1:], m)
 
     def residual(self, pt, Lsig_inv):
         """Stacked whitened residual vector (vis, gravity, chain, prior), as :meth:`evaluate`."""
@@ -369,28 +374,40 @@ class _Problem:
 
     def _normal_free(self, pt):
         """H and g of the visual, chain and prior rows (everything but the gravity rows)."""
-        psi, t, T = self.unpack(pt.x)
-        X, B1, BK, Z = pt.vis
+        X, u, B1, BK, Z, P, PZ, M = pt.vis
         n, d, K = len(X), self.dim, self.K
-        # visual: d X / d (psi, t, phi_1, theta_1, phi_K, theta_K) as (n, 8, 3)
-        Mc = np.stack(self._vis_mats(psi, T, B1, BK, Z)).transpose(2, 0, 1).reshape(3, 15)
-        dX = np.empty((n, 8, 3))
-        dX[:, 1:4] = np.eye(3)
-        dR = (self.a @ Mc).reshape(n, 5, 3)
-        dX[:, 0] = dR[:, 0]
-        dX[:, 4:] = dR[:, 1:]
-        iz = 1.0 / X[:, 2:3]
-        du = (dX[:, :, 0] - (X[:, 0:1] * iz) * dX[:, :, 2]) * iz  # d pi / d param (n, 8), both rows
-        dv = (dX[:, :, 1] - (X[:, 1:2] * iz) * dX[:, :, 2]) * iz
-        Jv = np.empty((n, 2, 8))  # d rw / d param = -W dpi (W lower triangular)
-        Jv[:, 0] = -self.W00[:, None] * du
-        Jv[:, 1] = -(self.W10[:, None] * du + self.W11[:, None] * dv)
-        Jv = Jv.reshape(2 * n, 8)
+        # visual: d M / d (psi, phi_1, theta_1, phi_K, theta_K) by the generators of Rz and R_tilt
+        # (d Rz = [e3]x Rz, d R_tilt / d phi = R_tilt [e1]x, d R_tilt / d theta = [e2]x R_tilt), the
+        # skew products written out as row / column permutations
+        Q = Z @ B1
+        S2B1 = np.array([B1[2], np.zeros(3), -B1[0]])  # [e2]x B1
+        V = BK.T @ Q
+        dM = np.empty((5, 3, 3))
+        dM[0] = P @ np.array([-Q[1], Q[0], np.zeros(3)])  # P [e3]x Q
+        dM[1, :, 0] = 0.0  # M [e1]x
+        dM[1, :, 1] = M[:, 2]
+        dM[1, :, 2] = -M[:, 1]
+        dM[2] = PZ @ S2B1
+        dM[3] = -self.w.R_ic.T @ np.array([np.zeros(3), -V[2], V[1]])  # -R_IC^T [e1]x BK^T Q
+        dM[4] = -P @ np.array([Q[2], np.zeros(3), -Q[0]])  # -P [e2]x Q
+        # d X / d (psi, t, phi_1, theta_1, phi_K, theta_K) = [a, 1] @ Mc, (n, 8, 3)
+        Mc = self._Mc
+        Mc[:3, :3] = dM[0].T
+        Mc[:3, 12:] = dM[1:].transpose(2, 0, 1).reshape(3, 12)
+        dX = (self.a1 @ Mc).reshape(n, 8, 3)
+        # d rw / d param = -W d pi / d X dX (W lower triangular), rows 0 then rows 1: A (2n, 8) = -J
+        iz = 1.0 / X[:, 2]
+        du = dX[:, :, 0] - u[:, 0:1] * dX[:, :, 2]
+        dv = dX[:, :, 1] - u[:, 1:2] * dX[:, :, 2]
+        A = self._Av
+        np.multiply((self.W00 * iz)[:, None], du, out=A[:n])
+        np.multiply((self.W10 * iz)[:, None], du, out=A[n:])
+        A[n:] += (self.W11 * iz)[:, None] * dv
         H = np.zeros((d, d))
         Hf = H.ravel()
-        Hf[self.idx_vis] = (Jv.T @ Jv).ravel()
+        Hf[self.idx_vis] = (A.T @ A).ravel()
         g = np.zeros(d)
-        g[np.r_[0:6, d - 2, d - 1]] = Jv.T @ pt.rv
+        g[self.cols_vis] = -(A.T @ pt.rv.reshape(n, 2).T.ravel())
         # chain link k: A_k on tilt k, Wg_k I on tilt k+1
         m = pt.m
         h = m[:, 1] ** 2 + m[:, 2] ** 2
