@@ -23,6 +23,8 @@ iterations. Units: angles in rad, translations in m, image coordinates normalize
 
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -155,14 +157,33 @@ def propagate_tilts(tilt1, gyro_inc) -> np.ndarray:
 # Residuals and Jacobians (vectorized over points and samples)
 
 
+def _gravity_parts(tilts):
+    """(K, 3, 3): rows g = R_tilt^T e3 = (-s_th, c_th s_ph, c_th c_ph), d g / d roll, d g / d pitch."""
+    c, s = np.cos(tilts), np.sin(tilts)
+    cp, ct, sp, st = c[:, 0], c[:, 1], s[:, 0], s[:, 1]
+    a, b, e, f = ct * sp, ct * cp, st * sp, st * cp
+    G = np.empty((len(tilts), 3, 3))
+    G[:, 0, 0], G[:, 0, 1], G[:, 0, 2] = -st, a, b
+    G[:, 1, 0], G[:, 1, 1], G[:, 1, 2] = 0.0, b, -a
+    G[:, 2, 0], G[:, 2, 1], G[:, 2, 2] = -ct, -e, -f
+    return G
+
+
 def _gravity_dir(tilts):
     """g = R_tilt^T e3 = (-s_th, c_th s_ph, c_th c_ph) and its derivatives (K, 3) each."""
-    ph, th = tilts[:, 0], tilts[:, 1]
-    sp, cp, st, ct = np.sin(ph), np.cos(ph), np.sin(th), np.cos(th)
-    g = np.column_stack([-st, ct * sp, ct * cp])
-    dg_ph = np.column_stack([np.zeros_like(ph), ct * cp, -ct * sp])
-    dg_th = np.column_stack([-ct, -st * sp, -st * cp])
-    return g, dg_ph, dg_th
+    G = _gravity_parts(tilts)
+    return G[:, 0], G[:, 1], G[:, 2]
+
+
+def _rot_parts(psi, ph1, th1, phK, thK):
+    """R_tilt(phi_1, theta_1), R_tilt(phi_K, theta_K), Rz(psi) written out (the products of
+    :func:`rtilt` / :func:`rot_z` have one nonzero term per entry: the same numbers)."""
+    out = []
+    for ph, th in ((ph1, th1), (phK, thK)):
+        cp, sp, ct, st = math.cos(ph), math.sin(ph), math.cos(th), math.sin(th)
+        out.append(np.array([[ct, st * sp, st * cp], [0.0, cp, -sp], [-st, ct * sp, ct * cp]]))
+    cz, sz = math.cos(psi), math.sin(psi)
+    return out[0], out[1], np.array([[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]])
 
 
 def _drtilt(ph, th):
@@ -192,6 +213,20 @@ def _chol2_inv(C):
     return W
 
 
+@functools.lru_cache(maxsize=64)
+def _normal_indices(K):
+    """Columns of the visual block (psi, t, tilt_1, tilt_K) and flat indices into H (dim x dim) of the
+    visual 8x8 block, the diagonal 2x2 tilt blocks, the chain blocks (k, k+1) and (k+1, k)."""
+    d = 4 + 2 * K
+    cols = np.r_[0:6, d - 2, d - 1]
+    blk = 4 + 2 * np.arange(K)[:, None, None] + np.arange(2)[None, :, None]  # (K, 2, 1) rows of tilt k
+    out = (cols, (cols[:, None] * d + cols[None, :]).ravel(), (blk * d + np.swapaxes(blk, 1, 2)).ravel(),
+           (blk[:-1] * d + np.swapaxes(blk[1:], 1, 2)).ravel(), (blk[1:] * d + np.swapaxes(blk[:-1], 1, 2)).ravel())
+    for a in out:
+        a.flags.writeable = False
+    return out
+
+
 class _Problem:
     """Whitened residual vector and Jacobian of one window for a fixed Sigma_imu."""
 
@@ -207,20 +242,13 @@ class _Problem:
         self.nv, self.ng, self.nc = 2 * n, 3 * self.K, 2 * (self.K - 1)
         self.dim = 4 + 2 * self.K
         self._last = None  # (x, Sigma-free parts) of the last evaluation with a Jacobian
-        # structured normal equations: the lower-triangular whitening factors, and flat indices into H of
-        # the visual 8x8 block (psi, t, tilt_1, tilt_K) and of the 2x2 tilt blocks (diagonal, chain links)
+        # structured normal equations: the lower-triangular whitening factors, the block indices into H
         self.W00, self.W10, self.W11 = Wvis[:, 0, 0], Wvis[:, 1, 0], Wvis[:, 1, 1]
-        d, K = self.dim, self.K
-        cols = np.r_[0:6, d - 2, d - 1]
-        self.cols_vis, self.idx_vis = cols, (cols[:, None] * d + cols[None, :]).ravel()
+        self.cols_vis, self.idx_vis, self.idx_diag, self.idx_up, self.idx_lo = _normal_indices(self.K)
         self.a1 = np.column_stack([self.a, np.ones(n)])  # homogeneous: d X / d t from the same product
         self._Mc = np.zeros((4, 24))  # [a, 1] @ Mc = d X / d (psi, t, tilt_1, tilt_K), (n, 8 x 3)
         self._Mc[3, 3:12] = np.eye(3).ravel()
         self._Av = np.empty((2 * n, 8))  # work array of the visual Jacobian
-        blk = 4 + 2 * np.arange(K)[:, None, None] + np.arange(2)[None, :, None]  # (K, 2, 1) rows of tilt k
-        self.idx_diag = (blk * d + np.swapaxes(blk, 1, 2)).ravel()
-        self.idx_up = (blk[:-1] * d + np.swapaxes(blk[1:], 1, 2)).ravel()  # block (k, k+1)
-        self.idx_lo = (blk[1:] * d + np.swapaxes(blk[:-1], 1, 2)).ravel()  # block (k+1, k)
         self.Hp = self.Wp.T @ self.Wp  # prior block of H (tilt_1, tilt_1)
 
     def unpack(self, x):
@@ -230,7 +258,7 @@ class _Problem:
         """Whitened visual residuals (n, 2) and the intermediates of their Jacobian; None if a point is
         behind the current camera."""
         w = self.w
-        B1, BK, Z = rtilt(*T[0]), rtilt(*T[-1]), rot_z(psi)
+        B1, BK, Z = _rot_parts(psi, *T[0].tolist(), *T[-1].tolist())
         P = w.R_ic.T @ BK.T
         PZ = P @ Z
         M = PZ @ B1  # X = a @ M^T + t
@@ -348,9 +376,10 @@ class _Problem:
         res = self._vis_residual(psi, t, T)
         if res is None:
             return None
-        ri, g, dgp, dgt = self.imu_raw(x)
-        rc, m = self._chain_residual(T, g)
-        return _Point(x, res[0].ravel(), ri, dgp, dgt, rc.ravel(), self._prior_residual(T), res[1:], m)
+        G = _gravity_parts(T)
+        rc, m = self._chain_residual(T, G[:, 0])
+        return _Point(x, res[0].ravel(), self.w.acc_dir - G[:, 0], G[:, 1:], rc.ravel(), self._prior_residual(T),
+                      res[1:], m)
 
     def residual(self, pt, Lsig_inv):
         """Stacked whitened residual vector (vis, gravity, chain, prior), as :meth:`evaluate`."""
@@ -440,10 +469,9 @@ class _Point:
 
     __slots__ = ("x", "rv", "ri", "D", "rc", "rp", "vis", "m", "H0", "g0")
 
-    def __init__(self, x, rv, ri, dgp, dgt, rc, rp, vis, m):
-        self.x, self.rv, self.ri, self.rc, self.rp, self.vis, self.m = x, rv, ri, rc, rp, vis, m
-        self.D = np.stack([dgp, dgt], axis=1)  # (K, 2, 3) d g_k / d (phi_k, theta_k)
-        self.H0 = self.g0 = None
+    def __init__(self, x, rv, ri, D, rc, rp, vis, m):
+        self.x, self.rv, self.ri, self.D, self.rc, self.rp, self.vis, self.m = x, rv, ri, D, rc, rp, vis, m
+        self.H0 = self.g0 = None  # D (K, 2, 3): d g_k / d (phi_k, theta_k)
 
 
 def _vis_covariance(w: FusionWindow, x0):
