@@ -246,10 +246,13 @@ class _Problem:
         self.W00, self.W10, self.W11 = Wvis[:, 0, 0], Wvis[:, 1, 0], Wvis[:, 1, 1]
         self.cols_vis, self.idx_vis, self.idx_diag, self.idx_up, self.idx_lo = _normal_indices(self.K)
         self.a1 = np.column_stack([self.a, np.ones(n)])  # homogeneous: d X / d t from the same product
-        self._Mc = np.zeros((4, 24))  # [a, 1] @ Mc = d X / d (psi, t, tilt_1, tilt_K), (n, 8 x 3)
-        self._Mc[3, 3:12] = np.eye(3).ravel()
+        self._Mc = np.zeros((4, 24))  # [a, 1] @ Mc = d X / d (psi, t, tilt_1, tilt_K), (n, 3 x 8)
+        self._Mc[3, [1, 10, 19]] = 1.0  # d X_c / d t_c
+        self._dM = np.zeros((8, 3, 3))  # d M / d (psi, t, tilt_1, tilt_K) work array (t: 0)
         self._Av = np.empty((2 * n, 8))  # work array of the visual Jacobian
-        self.Hp = self.Wp.T @ self.Wp  # prior block of H (tilt_1, tilt_1)
+        self._Dconst = np.zeros((self.K, 2, 2))  # J-independent part of the diagonal tilt blocks of H:
+        self._Dconst[1:] = (self.Wg ** 2)[:, None, None] * np.eye(2)  # chain rows of tilt k+1,
+        self._Dconst[0] += self.Wp.T @ self.Wp  # prior
 
     def unpack(self, x):
         return x[0], x[1:4], x[4:].reshape(self.K, 2)
@@ -263,9 +266,9 @@ class _Problem:
         PZ = P @ Z
         M = PZ @ B1  # X = a @ M^T + t
         X = self.a @ M.T + t
-        if np.any(X[:, 2] <= 0):
+        if X[:, 2].min() <= 0:  # (= np.any(X[:, 2] <= 0), NaN included)
             return None
-        u = project(X)
+        u = X[:, :2] / X[:, 2:3]  # project(X)
         return np.einsum("nij,nj->ni", self.Wvis, w.q - u), X, u, B1, BK, Z, P, PZ, M
 
     def _vis_mats(self, psi, T, B1, BK, Z):
@@ -409,25 +412,22 @@ class _Problem:
         # (d Rz = [e3]x Rz, d R_tilt / d phi = R_tilt [e1]x, d R_tilt / d theta = [e2]x R_tilt), the
         # skew products written out as row / column permutations
         Q = Z @ B1
-        S2B1 = np.array([B1[2], np.zeros(3), -B1[0]])  # [e2]x B1
         V = BK.T @ Q
-        dM = np.empty((5, 3, 3))
+        dM = self._dM  # (8, 3, 3) by parameter; the translation entries stay 0
         dM[0] = P @ np.array([-Q[1], Q[0], np.zeros(3)])  # P [e3]x Q
-        dM[1, :, 0] = 0.0  # M [e1]x
-        dM[1, :, 1] = M[:, 2]
-        dM[1, :, 2] = -M[:, 1]
-        dM[2] = PZ @ S2B1
-        dM[3] = -self.w.R_ic.T @ np.array([np.zeros(3), -V[2], V[1]])  # -R_IC^T [e1]x BK^T Q
-        dM[4] = -P @ np.array([Q[2], np.zeros(3), -Q[0]])  # -P [e2]x Q
-        # d X / d (psi, t, phi_1, theta_1, phi_K, theta_K) = [a, 1] @ Mc, (n, 8, 3)
+        dM[4, :, 1] = M[:, 2]  # M [e1]x (column 0 stays 0)
+        dM[4, :, 2] = -M[:, 1]
+        dM[5] = PZ @ np.array([B1[2], np.zeros(3), -B1[0]])  # P Z [e2]x B1
+        dM[6] = -self.w.R_ic.T @ np.array([np.zeros(3), -V[2], V[1]])  # -R_IC^T [e1]x BK^T Q
+        dM[7] = -P @ np.array([Q[2], np.zeros(3), -Q[0]])  # -P [e2]x Q
+        # d X_c / d (psi, t, phi_1, theta_1, phi_K, theta_K) = ([a, 1] @ Mc)[:, 8 c: 8 c + 8]
         Mc = self._Mc
-        Mc[:3, :3] = dM[0].T
-        Mc[:3, 12:] = dM[1:].transpose(2, 0, 1).reshape(3, 12)
-        dX = (self.a1 @ Mc).reshape(n, 8, 3)
+        Mc[:3] = dM.transpose(2, 1, 0).reshape(3, 24)
+        Y = self.a1 @ Mc
         # d rw / d param = -W d pi / d X dX (W lower triangular), rows 0 then rows 1: A (2n, 8) = -J
         iz = 1.0 / X[:, 2]
-        du = dX[:, :, 0] - u[:, 0:1] * dX[:, :, 2]
-        dv = dX[:, :, 1] - u[:, 1:2] * dX[:, :, 2]
+        du = Y[:, :8] - u[:, 0:1] * Y[:, 16:]
+        dv = Y[:, 8:16] - u[:, 1:2] * Y[:, 16:]
         A = self._Av
         np.multiply((self.W00 * iz)[:, None], du, out=A[:n])
         np.multiply((self.W10 * iz)[:, None], du, out=A[n:])
@@ -447,11 +447,8 @@ class _Problem:
         A[:, 1] = Wg * dm[:, :, 0] / np.sqrt(np.maximum(1.0 - m[:, 0:1] ** 2, 1e-300))
         rc = pt.rc.reshape(K - 1, 2)
         AT = np.swapaxes(A, 1, 2)
-        Dg = np.zeros((K, 2, 2))
-        Dg[:-1] = AT @ A
-        Dg[1:, 0, 0] += self.Wg ** 2
-        Dg[1:, 1, 1] += self.Wg ** 2
-        Dg[0] += self.Hp
+        Dg = self._Dconst.copy()
+        Dg[:-1] += AT @ A
         O = AT * Wg[:, :, None]
         Hf[self.idx_diag] += Dg.ravel()
         Hf[self.idx_up] += O.ravel()  # (+=: with K = 2 the visual tilt_1 / tilt_K block is this one)
