@@ -62,9 +62,17 @@ def sigma_step(residuals, lo, hi, prior_scatter=None, prior_dof: float = 0.0) ->
     hi = finite_scalar(hi, "hi")
     if not 0 < lo <= hi:
         raise DegenerateInput("sigma_step needs 0 < lo <= hi")
-    S = r.T @ r
     if prior_scatter is not None and prior_dof > 0:
-        S = S + as_matrix(prior_scatter, (3, 3), "prior_scatter")
+        prior_scatter = as_matrix(prior_scatter, (3, 3), "prior_scatter")
+    return _sigma_step(r, lo, hi, prior_scatter, prior_dof)
+
+
+def _sigma_step(r, lo, hi, prior_scatter, prior_dof) -> np.ndarray:
+    """:func:`sigma_step` on checked inputs."""
+    S = r.T @ r
+    K = len(r)
+    if prior_scatter is not None and prior_dof > 0:
+        S = S + prior_scatter
         K = K + float(prior_dof)
     s, V = np.linalg.eigh(S)
     return (V * np.clip(s / K, lo, hi)) @ V.T
@@ -583,7 +591,7 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
         if adaptive:
             # exact block minimiser; a recomputed cost above the old one can only be rounding
             # (same Sigma up to 1e-16), in which case the old Sigma is kept
-            Sig_n = sigma_step(pt.ri, w.lo, w.hi, scatter, w.sigma_prior_dof)
+            Sig_n = _sigma_step(pt.ri, w.lo, w.hi, scatter, w.sigma_prior_dof)
             Linv_n, c_sig_n = _sigma_parts(Sig_n, w)
             r_n = prob.residual(pt, Linv_n)  # only the gravity rows depend on Sigma
             c_n = float(r_n @ r_n) + c_sig_n
@@ -594,9 +602,8 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
             break
     x = pt.x
     H, _ = prob.normal(pt, Linv)
-    try:
-        C = np.linalg.inv(H)
-        cov_last = C[-2:, -2:].copy()
+    try:  # the last 2x2 block of H^-1: H^-1 applied to the last two unit vectors
+        cov_last = np.linalg.solve(H, np.eye(prob.dim)[:, -2:])[-2:]
     except np.linalg.LinAlgError:
         cov_last = np.full((2, 2), np.nan)
     state = FusionState(psi=float(wrap_angle(x[0])), t=x[1:4].copy(), tilts=x[4:].reshape(K, 2).copy(),
