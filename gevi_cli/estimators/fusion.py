@@ -34,7 +34,6 @@ from .errors import DegenerateInput, ShapeError
 from .lie import (
     drot_z,
     exp_so3,
-    project,
     project_jacobian,
     rot_x,
     rot_y,
@@ -236,7 +235,9 @@ def _normal_indices(K):
 
 
 class _Problem:
-    """Whitened residual vector and Jacobian of one window for a fixed Sigma_imu."""
+    """Whitened residual vector and Jacobian of one window for a fixed Sigma_imu.
+
+    ``Wvis`` are the lower-triangular factors of :func:`_chol2_inv` (the structured path uses W_01 = 0)."""
 
     def __init__(self, w: FusionWindow, Wvis):
         self.w = w
@@ -472,7 +473,7 @@ class _Problem:
 class _Point:
     """Sigma-free residual parts of one state (see :meth:`_Problem.at`)."""
 
-    __slots__ = ("x", "rv", "ri", "D", "rc", "rp", "vis", "m", "H0", "g0")
+    __slots__ = ("D", "H0", "g0", "m", "rc", "ri", "rp", "rv", "vis", "x")
 
     def __init__(self, x, rv, ri, D, rc, rp, vis, m):
         self.x, self.rv, self.ri, self.D, self.rc, self.rp, self.vis, self.m = x, rv, ri, D, rc, rp, vis, m
@@ -580,7 +581,7 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
                     rn = prob.residual(ptn, Linv)
                     cn = float(rn @ rn) + c_sig
                     if cn < cost:
-                        pt, r, cost = ptn, rn, cn
+                        pt, cost = ptn, cn
                         mu = max(mu / 10.0, 1e-12)
                         accepted = True
                         break
@@ -596,7 +597,7 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
             r_n = prob.residual(pt, Linv_n)  # only the gravity rows depend on Sigma
             c_n = float(r_n @ r_n) + c_sig_n
             if c_n <= cost:
-                Sigma, Linv, c_sig, r, cost = Sig_n, Linv_n, c_sig_n, r_n, c_n
+                Sigma, Linv, c_sig, cost = Sig_n, Linv_n, c_sig_n, c_n
             hist.append(cost)
         if start - cost < rel_tol * abs(start):
             break
