@@ -23,6 +23,8 @@ iterations. Units: angles in rad, translations in m, image coordinates normalize
 
 from __future__ import annotations
 
+import functools
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -32,7 +34,6 @@ from .errors import DegenerateInput, ShapeError
 from .lie import (
     drot_z,
     exp_so3,
-    project,
     project_jacobian,
     rot_x,
     rot_y,
@@ -60,9 +61,17 @@ def sigma_step(residuals, lo, hi, prior_scatter=None, prior_dof: float = 0.0) ->
     hi = finite_scalar(hi, "hi")
     if not 0 < lo <= hi:
         raise DegenerateInput("sigma_step needs 0 < lo <= hi")
-    S = r.T @ r
     if prior_scatter is not None and prior_dof > 0:
-        S = S + as_matrix(prior_scatter, (3, 3), "prior_scatter")
+        prior_scatter = as_matrix(prior_scatter, (3, 3), "prior_scatter")
+    return _sigma_step(r, lo, hi, prior_scatter, prior_dof)
+
+
+def _sigma_step(r, lo, hi, prior_scatter, prior_dof) -> np.ndarray:
+    """:func:`sigma_step` on checked inputs."""
+    S = r.T @ r
+    K = len(r)
+    if prior_scatter is not None and prior_dof > 0:
+        S = S + prior_scatter
         K = K + float(prior_dof)
     s, V = np.linalg.eigh(S)
     return (V * np.clip(s / K, lo, hi)) @ V.T
@@ -155,14 +164,33 @@ def propagate_tilts(tilt1, gyro_inc) -> np.ndarray:
 # Residuals and Jacobians (vectorized over points and samples)
 
 
+def _gravity_parts(tilts):
+    """(K, 3, 3): rows g = R_tilt^T e3 = (-s_th, c_th s_ph, c_th c_ph), d g / d roll, d g / d pitch."""
+    c, s = np.cos(tilts), np.sin(tilts)
+    cp, ct, sp, st = c[:, 0], c[:, 1], s[:, 0], s[:, 1]
+    a, b, e, f = ct * sp, ct * cp, st * sp, st * cp
+    G = np.empty((len(tilts), 3, 3))
+    G[:, 0, 0], G[:, 0, 1], G[:, 0, 2] = -st, a, b
+    G[:, 1, 0], G[:, 1, 1], G[:, 1, 2] = 0.0, b, -a
+    G[:, 2, 0], G[:, 2, 1], G[:, 2, 2] = -ct, -e, -f
+    return G
+
+
 def _gravity_dir(tilts):
     """g = R_tilt^T e3 = (-s_th, c_th s_ph, c_th c_ph) and its derivatives (K, 3) each."""
-    ph, th = tilts[:, 0], tilts[:, 1]
-    sp, cp, st, ct = np.sin(ph), np.cos(ph), np.sin(th), np.cos(th)
-    g = np.column_stack([-st, ct * sp, ct * cp])
-    dg_ph = np.column_stack([np.zeros_like(ph), ct * cp, -ct * sp])
-    dg_th = np.column_stack([-ct, -st * sp, -st * cp])
-    return g, dg_ph, dg_th
+    G = _gravity_parts(tilts)
+    return G[:, 0], G[:, 1], G[:, 2]
+
+
+def _rot_parts(psi, ph1, th1, phK, thK):
+    """R_tilt(phi_1, theta_1), R_tilt(phi_K, theta_K), Rz(psi) written out (the products of
+    :func:`rtilt` / :func:`rot_z` have one nonzero term per entry: the same numbers)."""
+    out = []
+    for ph, th in ((ph1, th1), (phK, thK)):
+        cp, sp, ct, st = math.cos(ph), math.sin(ph), math.cos(th), math.sin(th)
+        out.append(np.array([[ct, st * sp, st * cp], [0.0, cp, -sp], [-st, ct * sp, ct * cp]]))
+    cz, sz = math.cos(psi), math.sin(psi)
+    return out[0], out[1], np.array([[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]])
 
 
 def _drtilt(ph, th):
@@ -192,8 +220,24 @@ def _chol2_inv(C):
     return W
 
 
+@functools.lru_cache(maxsize=64)
+def _normal_indices(K):
+    """Columns of the visual block (psi, t, tilt_1, tilt_K) and flat indices into H (dim x dim) of the
+    visual 8x8 block, the diagonal 2x2 tilt blocks, the chain blocks (k, k+1) and (k+1, k)."""
+    d = 4 + 2 * K
+    cols = np.r_[0:6, d - 2, d - 1]
+    blk = 4 + 2 * np.arange(K)[:, None, None] + np.arange(2)[None, :, None]  # (K, 2, 1) rows of tilt k
+    out = (cols, (cols[:, None] * d + cols[None, :]).ravel(), (blk * d + np.swapaxes(blk, 1, 2)).ravel(),
+           (blk[:-1] * d + np.swapaxes(blk[1:], 1, 2)).ravel(), (blk[1:] * d + np.swapaxes(blk[:-1], 1, 2)).ravel())
+    for a in out:
+        a.flags.writeable = False
+    return out
+
+
 class _Problem:
-    """Whitened residual vector and Jacobian of one window for a fixed Sigma_imu."""
+    """Whitened residual vector and Jacobian of one window for a fixed Sigma_imu.
+
+    ``Wvis`` are the lower-triangular factors of :func:`_chol2_inv` (the structured path uses W_01 = 0)."""
 
     def __init__(self, w: FusionWindow, Wvis):
         self.w = w
@@ -207,32 +251,58 @@ class _Problem:
         self.nv, self.ng, self.nc = 2 * n, 3 * self.K, 2 * (self.K - 1)
         self.dim = 4 + 2 * self.K
         self._last = None  # (x, Sigma-free parts) of the last evaluation with a Jacobian
+        # structured normal equations: the lower-triangular whitening factors, the block indices into H
+        self.W00, self.W10, self.W11 = Wvis[:, 0, 0], Wvis[:, 1, 0], Wvis[:, 1, 1]
+        self.cols_vis, self.idx_vis, self.idx_diag, self.idx_up, self.idx_lo = _normal_indices(self.K)
+        self.a1 = np.column_stack([self.a, np.ones(n)])  # homogeneous: d X / d t from the same product
+        self._Mc = np.zeros((4, 24))  # [a, 1] @ Mc = d X / d (psi, t, tilt_1, tilt_K), (n, 3 x 8)
+        self._Mc[3, [1, 10, 19]] = 1.0  # d X_c / d t_c
+        self._dM = np.zeros((8, 3, 3))  # d M / d (psi, t, tilt_1, tilt_K) work array (t: 0)
+        self._Av = np.empty((2 * n, 8))  # work array of the visual Jacobian
+        self._Dconst = np.zeros((self.K, 2, 2))  # J-independent part of the diagonal tilt blocks of H:
+        self._Dconst[1:] = (self.Wg ** 2)[:, None, None] * np.eye(2)  # chain rows of tilt k+1,
+        self._Dconst[0] += self.Wp.T @ self.Wp  # prior
 
     def unpack(self, x):
         return x[0], x[1:4], x[4:].reshape(self.K, 2)
 
-    def vis(self, x, jac=True):
-        psi, t, T = self.unpack(x)
+    def _vis_residual(self, psi, t, T):
+        """Whitened visual residuals (n, 2) and the intermediates of their Jacobian; None if a point is
+        behind the current camera."""
         w = self.w
-        B1, BK, Z = rtilt(*T[0]), rtilt(*T[-1]), rot_z(psi)
-        Ric = w.R_ic
-        M = Ric.T @ BK.T @ Z @ B1  # X = a @ M^T + t
+        B1, BK, Z = _rot_parts(psi, *T[0].tolist(), *T[-1].tolist())
+        P = w.R_ic.T @ BK.T
+        PZ = P @ Z
+        M = PZ @ B1  # X = a @ M^T + t
         X = self.a @ M.T + t
-        if np.any(X[:, 2] <= 0):
-            return None, None
-        r = w.q - project(X)
-        rw = np.einsum("nij,nj->ni", self.Wvis, r)
-        if not jac:
-            return rw.ravel(), None
+        if X[:, 2].min() <= 0:  # (= np.any(X[:, 2] <= 0), NaN included)
+            return None
+        u = X[:, :2] / X[:, 2:3]  # project(X)
+        return np.einsum("nij,nj->ni", self.Wvis, w.q - u), X, u, B1, BK, Z, P, PZ, M
+
+    def _vis_mats(self, psi, T, B1, BK, Z):
+        """d M / d (psi, phi_1, theta_1, phi_K, theta_K) (5 matrices, M = R_IC^T B_K^T Rz(psi) B_1)."""
+        Ric = self.w.R_ic
         d1p, d1t = _drtilt(*T[0])
         dKp, dKt = _drtilt(*T[-1])
-        mats = (
+        return (
             Ric.T @ BK.T @ drot_z(psi) @ B1,
             Ric.T @ BK.T @ Z @ d1p,
             Ric.T @ BK.T @ Z @ d1t,
             Ric.T @ dKp.T @ Z @ B1,
             Ric.T @ dKt.T @ Z @ B1,
         )
+
+    def vis(self, x, jac=True):
+        """Dense reference: whitened visual residuals (2n,) [and their (2n, dim) Jacobian]."""
+        psi, t, T = self.unpack(x)
+        res = self._vis_residual(psi, t, T)
+        if res is None:
+            return None, None
+        rw, X, _, B1, BK, Z = res[:6]
+        if not jac:
+            return rw.ravel(), None
+        mats = self._vis_mats(psi, T, B1, BK, Z)
         dX = np.stack([self.a @ Mj.T for Mj in mats], axis=2)  # (n, 3, 5)
         P = project_jacobian(X)  # (n, 2, 3)
         WP = -self.Wvis @ P  # d rw / d X
@@ -249,11 +319,16 @@ class _Problem:
         g, dgp, dgt = _gravity_dir(T)
         return self.w.acc_dir - g, g, dgp, dgt
 
-    def chain(self, T, g, dgp, dgt, jac=True):
+    def _chain_residual(self, T, g):
+        """Whitened gyro-chain residuals (K-1, 2) and m_k = dR_k^T g_k (K-1, 3)."""
         m = np.einsum("kji,kj->ki", self.dR, g[:-1])  # dR_k^T g_k
         roll = np.arctan2(m[:, 1], m[:, 2])
         pitch = -np.arcsin(np.clip(m[:, 0], -1.0, 1.0))
-        r = np.column_stack([wrap_angle(T[1:, 0] - roll), T[1:, 1] - pitch]) * self.Wg[:, None]
+        return np.column_stack([wrap_angle(T[1:, 0] - roll), T[1:, 1] - pitch]) * self.Wg[:, None], m
+
+    def chain(self, T, g, dgp, dgt, jac=True):
+        """Dense reference: whitened gyro-chain residuals [and their (2(K-1), dim) Jacobian]."""
+        r, m = self._chain_residual(T, g)
         if not jac:
             return r.ravel(), None
         Km = self.K - 1
@@ -274,7 +349,8 @@ class _Problem:
     def evaluate(self, x, Lsig_inv, jac=True):
         """Stacked whitened residuals (vis, gravity, chain, prior) [and Jacobian]; None if invalid.
 
-        Only the gravity block depends on Sigma: the parts of the last state evaluated with a Jacobian
+        The dense reference of :meth:`at` / :meth:`residual` / :meth:`normal` (which :func:`bcd_refine`
+        uses). Only the gravity block depends on Sigma: the parts of the last state evaluated with a Jacobian
         are kept, so the Sigma-step's re-evaluation at an unchanged state costs just the re-whitening."""
         if jac and self._last is not None and np.array_equal(self._last[0], x):
             rv, Jv, ri, dgp, dgt, rc, Jc, rp = self._last[1:]
@@ -285,7 +361,7 @@ class _Problem:
             _, _, T = self.unpack(x)
             ri, g, dgp, dgt = self.imu_raw(x)
             rc, Jc = self.chain(T, g, dgp, dgt, jac)
-            rp = self.Wp @ np.array([wrap_angle(T[0, 0] - self.w.prior_mean[0]), T[0, 1] - self.w.prior_mean[1]])
+            rp = self._prior_residual(T)
             if jac:
                 self._last = (x.copy(), rv, Jv, ri, dgp, dgt, rc, Jc, rp)
         r = np.concatenate([rv, (ri @ Lsig_inv.T).ravel(), rc, rp])
@@ -299,6 +375,109 @@ class _Problem:
         Jp[:, 4:6] = self.Wp
         J = np.concatenate([Jv, Ji.reshape(-1, self.dim), Jc, Jp])
         return r, ri, J
+
+    def _prior_residual(self, T):
+        return self.Wp @ np.array([wrap_angle(T[0, 0] - self.w.prior_mean[0]), T[0, 1] - self.w.prior_mean[1]])
+
+    # --- structured path: the same residuals, normal equations assembled from the Jacobian's blocks
+
+    def at(self, x):
+        """The Sigma-free residuals at state ``x`` (a :class:`_Point`; its Jacobian parts are formed on
+        demand by :meth:`normal`), or None if a point is behind the current camera."""
+        psi, t, T = self.unpack(x)
+        res = self._vis_residual(psi, t, T)
+        if res is None:
+            return None
+        G = _gravity_parts(T)
+        rc, m = self._chain_residual(T, G[:, 0])
+        return _Point(x, res[0].ravel(), self.w.acc_dir - G[:, 0], G[:, 1:], rc.ravel(), self._prior_residual(T),
+                      res[1:], m)
+
+    def residual(self, pt, Lsig_inv):
+        """Stacked whitened residual vector (vis, gravity, chain, prior), as :meth:`evaluate`."""
+        return np.concatenate([pt.rv, (pt.ri @ Lsig_inv.T).ravel(), pt.rc, pt.rp])
+
+    def normal(self, pt, Lsig_inv):
+        """Gauss-Newton normal equations (H = J^T J, g = J^T r) at ``pt`` for Sigma_imu = L L^T.
+
+        Assembled from the blocks of J: the visual rows touch only psi, t, tilt_1, tilt_K (an 8x8
+        normal matrix), the gravity rows of sample k only tilt k (2x2 blocks), a chain link tilts k and
+        k+1 (block-tridiagonal), the prior tilt_1. The Sigma-free part is kept in ``pt``."""
+        if pt.H0 is None:
+            pt.H0, pt.g0 = self._normal_free(pt)
+        L3 = pt.D @ Lsig_inv.T  # (K, 2, 3): whitened d g_k / d (phi_k, theta_k), up to the sign
+        rg = pt.ri @ Lsig_inv.T
+        H = pt.H0.copy()
+        H.ravel()[self.idx_diag] += (L3 @ np.swapaxes(L3, 1, 2)).ravel()
+        g = pt.g0.copy()
+        g[4:] -= np.einsum("kcj,kj->kc", L3, rg).ravel()
+        return H, g
+
+    def _normal_free(self, pt):
+        """H and g of the visual, chain and prior rows (everything but the gravity rows)."""
+        X, u, B1, BK, Z, P, PZ, M = pt.vis
+        n, d, K = len(X), self.dim, self.K
+        # visual: d M / d (psi, phi_1, theta_1, phi_K, theta_K) by the generators of Rz and R_tilt
+        # (d Rz = [e3]x Rz, d R_tilt / d phi = R_tilt [e1]x, d R_tilt / d theta = [e2]x R_tilt), the
+        # skew products written out as row / column permutations
+        Q = Z @ B1
+        V = BK.T @ Q
+        dM = self._dM  # (8, 3, 3) by parameter; the translation entries stay 0
+        dM[0] = P @ np.array([-Q[1], Q[0], np.zeros(3)])  # P [e3]x Q
+        dM[4, :, 1] = M[:, 2]  # M [e1]x (column 0 stays 0)
+        dM[4, :, 2] = -M[:, 1]
+        dM[5] = PZ @ np.array([B1[2], np.zeros(3), -B1[0]])  # P Z [e2]x B1
+        dM[6] = -self.w.R_ic.T @ np.array([np.zeros(3), -V[2], V[1]])  # -R_IC^T [e1]x BK^T Q
+        dM[7] = -P @ np.array([Q[2], np.zeros(3), -Q[0]])  # -P [e2]x Q
+        # d X_c / d (psi, t, phi_1, theta_1, phi_K, theta_K) = ([a, 1] @ Mc)[:, 8 c: 8 c + 8]
+        Mc = self._Mc
+        Mc[:3] = dM.transpose(2, 1, 0).reshape(3, 24)
+        Y = self.a1 @ Mc
+        # d rw / d param = -W d pi / d X dX (W lower triangular), rows 0 then rows 1: A (2n, 8) = -J
+        iz = 1.0 / X[:, 2]
+        du = Y[:, :8] - u[:, 0:1] * Y[:, 16:]
+        dv = Y[:, 8:16] - u[:, 1:2] * Y[:, 16:]
+        A = self._Av
+        np.multiply((self.W00 * iz)[:, None], du, out=A[:n])
+        np.multiply((self.W10 * iz)[:, None], du, out=A[n:])
+        A[n:] += (self.W11 * iz)[:, None] * dv
+        H = np.zeros((d, d))
+        Hf = H.ravel()
+        Hf[self.idx_vis] = (A.T @ A).ravel()
+        g = np.zeros(d)
+        g[self.cols_vis] = -(A.T @ pt.rv.reshape(n, 2).T.ravel())
+        # chain link k: A_k on tilt k, Wg_k I on tilt k+1
+        m = pt.m
+        h = m[:, 1] ** 2 + m[:, 2] ** 2
+        dm = pt.D[:-1] @ self.dR  # (K-1, 2, 3): d m_k / d (phi_k, theta_k), one row per angle
+        Wg = self.Wg[:, None]
+        A = np.empty((K - 1, 2, 2))
+        A[:, 0] = -Wg * (m[:, 2:3] * dm[:, :, 1] - m[:, 1:2] * dm[:, :, 2]) / h[:, None]
+        A[:, 1] = Wg * dm[:, :, 0] / np.sqrt(np.maximum(1.0 - m[:, 0:1] ** 2, 1e-300))
+        rc = pt.rc.reshape(K - 1, 2)
+        AT = np.swapaxes(A, 1, 2)
+        Dg = self._Dconst.copy()
+        Dg[:-1] += AT @ A
+        O = AT * Wg[:, :, None]
+        Hf[self.idx_diag] += Dg.ravel()
+        Hf[self.idx_up] += O.ravel()  # (+=: with K = 2 the visual tilt_1 / tilt_K block is this one)
+        Hf[self.idx_lo] += np.swapaxes(O, 1, 2).ravel()
+        gt = np.zeros((K, 2))
+        gt[:-1] = np.einsum("kji,kj->ki", A, rc)
+        gt[1:] += Wg * rc
+        gt[0] += self.Wp.T @ pt.rp
+        g[4:] += gt.ravel()
+        return H, g
+
+
+class _Point:
+    """Sigma-free residual parts of one state (see :meth:`_Problem.at`)."""
+
+    __slots__ = ("D", "H0", "g0", "m", "rc", "ri", "rp", "rv", "vis", "x")
+
+    def __init__(self, x, rv, ri, D, rc, rp, vis, m):
+        self.x, self.rv, self.ri, self.D, self.rc, self.rp, self.vis, self.m = x, rv, ri, D, rc, rp, vis, m
+        self.H0 = self.g0 = None  # D (K, 2, 3): d g_k / d (phi_k, theta_k)
 
 
 def _vis_covariance(w: FusionWindow, x0):
@@ -376,9 +555,10 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
     prob = _Problem(w, _chol2_inv(_vis_covariance(w, x)))
     Sigma = w.lo * np.eye(3)
     Linv, c_sig = _sigma_parts(Sigma, w)
-    r, ri, J = prob.evaluate(x, Linv)
-    if r is None:
+    pt = prob.at(x)
+    if pt is None:
         raise DegenerateInput("bcd_refine: invalid initial estimate")
+    r = prob.residual(pt, Linv)
     cost = float(r @ r) + c_sig
     scatter = None if w.sigma_prior is None else w.sigma_prior * w.sigma_prior_dof
     hist = [cost]
@@ -387,8 +567,7 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
         start = cost
         # chi-step: LM with Sigma fixed, accept only decreases
         for _ in range(lm_iters):
-            H = J.T @ J
-            gvec = J.T @ r
+            H, gvec = prob.normal(pt, Linv)
             dH = np.diag(H).copy()
             accepted = False
             for _ in range(10):
@@ -397,12 +576,12 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
                 except np.linalg.LinAlgError:
                     mu *= 10.0
                     continue
-                xn = x + d
-                rn, rin, Jn = prob.evaluate(xn, Linv)
-                if rn is not None:
+                ptn = prob.at(pt.x + d)
+                if ptn is not None:
+                    rn = prob.residual(ptn, Linv)
                     cn = float(rn @ rn) + c_sig
                     if cn < cost:
-                        x, r, ri, J, cost = xn, rn, rin, Jn, cn
+                        pt, cost = ptn, cn
                         mu = max(mu / 10.0, 1e-12)
                         accepted = True
                         break
@@ -413,19 +592,19 @@ def bcd_refine(window: FusionWindow, adaptive=True, max_iter=6, rel_tol=1e-6, lm
         if adaptive:
             # exact block minimiser; a recomputed cost above the old one can only be rounding
             # (same Sigma up to 1e-16), in which case the old Sigma is kept
-            Sig_n = sigma_step(ri, w.lo, w.hi, scatter, w.sigma_prior_dof)
+            Sig_n = _sigma_step(pt.ri, w.lo, w.hi, scatter, w.sigma_prior_dof)
             Linv_n, c_sig_n = _sigma_parts(Sig_n, w)
-            r_n, ri_n, J_n = prob.evaluate(x, Linv_n)
+            r_n = prob.residual(pt, Linv_n)  # only the gravity rows depend on Sigma
             c_n = float(r_n @ r_n) + c_sig_n
             if c_n <= cost:
-                Sigma, Linv, c_sig, r, ri, J, cost = Sig_n, Linv_n, c_sig_n, r_n, ri_n, J_n, c_n
+                Sigma, Linv, c_sig, cost = Sig_n, Linv_n, c_sig_n, c_n
             hist.append(cost)
         if start - cost < rel_tol * abs(start):
             break
-    H = J.T @ J
-    try:
-        C = np.linalg.inv(H)
-        cov_last = C[-2:, -2:].copy()
+    x = pt.x
+    H, _ = prob.normal(pt, Linv)
+    try:  # the last 2x2 block of H^-1: H^-1 applied to the last two unit vectors
+        cov_last = np.linalg.solve(H, np.eye(prob.dim)[:, -2:])[-2:]
     except np.linalg.LinAlgError:
         cov_last = np.full((2, 2), np.nan)
     state = FusionState(psi=float(wrap_angle(x[0])), t=x[1:4].copy(), tilts=x[4:].reshape(K, 2).copy(),
