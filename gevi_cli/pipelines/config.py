@@ -156,8 +156,8 @@ class FusionConfig:
     acc_window_s: float = opt(0.4, "acceleration compensation [PROPOSAL]: the gravity residual removes the body "
                                    "acceleration fitted to the visually tracked positions of the last this many "
                                    "seconds from the specific force; 0: the paper's model (specific force only)")
-    acc_order: int = opt(2, "degree of that position fit (2: the window's mean acceleration; 3: extrapolated to the "
-                            "frame)")
+    acc_order: int = opt(0, "degree of that position fit: 0 chooses 2 or 3 per frame by the smaller estimated mean "
+                            "squared error (the lag of 2 against the noise of 3); 2 or 3 forces it")
 
 
 @dataclass
@@ -187,6 +187,7 @@ class OdometryConfig:
 
     def validate(self, where: str = "config") -> "OdometryConfig":
         from gevi_cli.config import check_choice
+        from gevi_cli.errors import GeviError
 
         check_choice(self.pnp.method, PNP_METHODS, f"{where}: pnp.method")
         check_choice(self.verify.ransac, RANSAC_METHODS, f"{where}: verify.ransac")
@@ -194,6 +195,10 @@ class OdometryConfig:
         check_choice(self.noise.method, NOISE_METHODS, f"{where}: noise.method")
         check_choice(self.ba.kernel, ("huber", "truncated", "none"), f"{where}: ba.kernel")
         check_choice(self.fusion.mode, ("bcd", "4dof"), f"{where}: fusion.mode")
+        if self.fusion.acc_order not in (0, 2, 3):
+            raise GeviError(f"{where}: fusion.acc_order", f"{self.fusion.acc_order!r} is not one of 0, 2, 3")
+        if not self.fusion.acc_window_s >= 0:
+            raise GeviError(f"{where}: fusion.acc_window_s", f"must be >= 0 (s), got {self.fusion.acc_window_s}")
         return self
 
 

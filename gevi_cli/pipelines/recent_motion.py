@@ -61,16 +61,19 @@ class RecentMotion:
         """Acceleration at ``t_ns`` (m/s^2, W) from the positions over ``acc_window_s``: the window ends
         at ``t_ns`` for the frame being tracked and slides forward, up to centred on ``t_ns``, as later
         frames are known (a frame of the BCD window is re-read each frame).  Zero until the window holds
-        ``acc_order + 3`` frames over at least 60 % of its length (a standstill start begins at rest).
+        6 frames over at least 60 % of its length (a standstill start begins at rest).
 
-        A polynomial of degree ``acc_order`` is fitted by least squares; with time measured from
-        ``t_ns`` the acceleration there is twice its quadratic coefficient, whatever the degree: degree
-        2 gives the window's mean acceleration (a lag of half the window when it ends at ``t_ns``),
-        degree 3 extrapolates its trend at a higher noise.  The estimate is then shrunk toward zero by
-        the Wiener gain ``S / (S + var)``: ``var`` from the fit's residuals, ``S`` the recent signal
-        power.  Where the tracked positions are noisy (a turbid floor, ~2 mm per frame) the second
-        derivative is mostly noise; measured on pool-hard_s2 (60 s), the unshrunk degree-3 estimate was
-        off by 0.1-0.9 m/s^2 RMS per 5 s against 0.06-0.57 m/s^2 of true acceleration."""
+        Polynomials of degree 2 and 3 are fitted by least squares; with time measured from ``t_ns`` the
+        acceleration there is twice the quadratic coefficient, whatever the degree.  Degree 2 gives the
+        window's mean acceleration (a lag of half the window when it ends at ``t_ns``), degree 3
+        extrapolates its trend at a higher noise.  The one with the smaller estimated mean squared error
+        is kept: ``var3`` for degree 3, ``var2 + bias^2`` for degree 2, the bias from the two estimates'
+        difference (for nested fits ``Var(a3 - a2) = var3 - var2``), the noise from the cubic's
+        residuals.  The estimate is then shrunk toward zero by the Wiener gain ``S / (S + mse)``, ``S``
+        the recent signal power.  Where the tracked positions are noisy (a turbid floor, ~2 mm per frame)
+        the second derivative is mostly noise: measured on pool-hard_s2 (60 s), the unshrunk degree-3
+        estimate was off by 0.1-0.9 m/s^2 RMS per 5 s against 0.06-0.57 m/s^2 of true acceleration.
+        ``acc_order`` 2 or 3 forces that degree instead."""
         W = self.acc_window_ns
         if W <= 0 or not self.t:
             return np.zeros(3)
@@ -78,16 +81,26 @@ class RecentMotion:
         ahead = min(max(int(t[-1]) - int(t_ns), 0), W // 2)
         sel = (t >= t_ns - W + ahead) & (t <= t_ns + ahead)
         tau = (t[sel] - t_ns) * 1e-9
-        dof = len(tau) - self.acc_order - 1
-        if dof < 2 or tau[-1] - tau[0] < 0.6 * W * 1e-9:
+        if len(tau) < 6 or tau[-1] - tau[0] < 0.6 * W * 1e-9:
             return np.zeros(3)
         P = np.array(self.p)[sel]
-        V = np.vander(tau, self.acc_order + 1, increasing=True)
-        coef, rss, *_ = np.linalg.lstsq(V, P - P[-1], rcond=None)
-        if len(rss) == 0:
+        P = P - P[-1]
+        V3 = np.vander(tau, 4, increasing=True)
+        c3, rss3, *_ = np.linalg.lstsq(V3, P, rcond=None)
+        if len(rss3) == 0:
             return np.zeros(3)
-        a = 2.0 * coef[2]
-        var_a = 4.0 * float(np.sum(rss)) / (3 * dof) * float(np.linalg.inv(V.T @ V)[2, 2])
-        self.power = [x for x in self.power if t_ns - x[0] <= POWER_WINDOW_NS] + [(int(t_ns), float(a @ a) / 3 - var_a)]
+        s2 = float(np.sum(rss3)) / (3 * (len(tau) - 4))  # position noise variance per axis (m^2)
+        a3 = 2.0 * c3[2]
+        var3 = 4.0 * s2 * float(np.linalg.inv(V3.T @ V3)[2, 2])
+        a, mse = a3, var3
+        if self.acc_order != 3:
+            V2 = V3[:, :3]
+            c2, *_ = np.linalg.lstsq(V2, P, rcond=None)
+            a2 = 2.0 * c2[2]
+            var2 = 4.0 * s2 * float(np.linalg.inv(V2.T @ V2)[2, 2])
+            bias2 = max(float((a3 - a2) @ (a3 - a2)) / 3 - (var3 - var2), 0.0)
+            if self.acc_order == 2 or var2 + bias2 < var3:
+                a, mse = a2, var2 + bias2
+        self.power = [x for x in self.power if t_ns - x[0] <= POWER_WINDOW_NS] + [(int(t_ns), float(a @ a) / 3 - mse)]
         S = max(float(np.mean([x[1] for x in self.power])), 0.0)
-        return a * (S / (S + var_a)) if S + var_a > 0 else np.zeros(3)
+        return a * (S / (S + mse)) if S + mse > 0 else np.zeros(3)
