@@ -24,21 +24,12 @@ _SIN = np.sin(np.outer([1, 2], _ANG5))
 _CS_T = np.ascontiguousarray(np.concatenate([_COS, _SIN]).T)  # (5, 4): f @ _CS_T = [a1, a2, b1, b2] * 5/2
 
 
-def _cross(a, b):
-    """np.cross for (..., 3) arrays without its axis-juggling overhead."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
-    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
-    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    return out
-
-
 _RZ5T = np.ascontiguousarray(np.swapaxes(_RZ5, 1, 2))
 
 # The fast paths below evaluate every quantity with the very floating-point operations of the plain
 # formulas (each entry of a matrix product is the same 3-term dot product, cross products
-# a x b = a[P1] b[P2] - a[P2] b[P1] componentwise as in _cross / np.cross, sums over 3 terms left to
-# right as numpy reduces them), only laid out for fewer and larger numpy calls.
+# a x b = a[P1] b[P2] - a[P2] b[P1] componentwise as in np.cross, sums over 3 terms left to right
+# as numpy reduces them), only laid out for fewer and larger numpy calls.
 _P1 = np.array([1, 2, 0])
 _P2 = np.array([2, 0, 1])
 _P12 = np.concatenate([_P1, _P2])
@@ -64,17 +55,16 @@ def _companion(B):
     return C.copy()
 
 
-def _level_points(uT, wT):
-    """Per-point data of levelled bearings given transposed, uT, wT (3, n), for :func:`_solve_core`:
-    (n, 11) array [u, w permuted by P2 then by P1, |u|, |w|]."""
-    P = np.empty((uT.shape[1], 11))
-    P[:, :3] = uT.T
-    P[:, 3:9] = wT[_P21].T
-    for x, out in ((uT, P[:, 9]), (wT, P[:, 10])):
-        x = x * x
-        x[0] += x[1]
-        x[0] += x[2]  # = np.add.reduce over the components (left to right)
-        np.sqrt(x[0], out=out)
+def _level_points(uwT):
+    """Per-point data of levelled bearings u, w given transposed and stacked, uwT (6, n) = [u^T; w^T],
+    for :func:`_solve_core`: (n, 11) array [u, w permuted by P2 then by P1, |u|, |w|]."""
+    P = np.empty((uwT.shape[1], 11))
+    P[:, :3] = uwT[:3].T
+    P[:, 3:9] = uwT[3 + _P21].T
+    x = (uwT * uwT).reshape(2, 3, -1)
+    x[:, 0] += x[:, 1]
+    x[:, 0] += x[:, 2]  # = np.add.reduce over the components (left to right)
+    P[:, 9:] = np.sqrt(x[:, 0]).T
     return P
 
 
@@ -83,8 +73,8 @@ def _solve_batch(u, w, unit_tol=1e-3):
 
     Returns (sample_index (H,), psi (H,), tau (H, 3) unit, in the level frame).
     """
-    u = np.asarray(u, dtype=float)
-    P = _level_points(u.reshape(-1, 3).T, np.asarray(w, dtype=float).reshape(-1, 3).T).reshape(u.shape[0], 3, 11)
+    u, w = np.asarray(u, dtype=float), np.asarray(w, dtype=float)
+    P = _level_points(np.concatenate([u.reshape(-1, 3).T, w.reshape(-1, 3).T])).reshape(u.shape[0], 3, 11)
     sidx, psi, tau, _ = _solve_core(P, unit_tol)
     return sidx, psi, tau
 
@@ -224,16 +214,6 @@ def ransac_iterations(w, s=3, p=0.99) -> int:
     return int(math.ceil(math.log(1.0 - p) / math.log(1.0 - w**s)))
 
 
-def _cheirality_sign(psi, t_dir, z, q, L_k, L_c):
-    R = np.asarray(L_c).T @ rot_z(psi) @ np.asarray(L_k)
-    Rz_ = homogeneous(z) @ R.T
-    qh = homogeneous(q)
-    qxR = np.cross(qh, Rz_)
-    # keyframe depth lambda_k = -(q x t).(q x Rz)/|q x Rz|^2 must be > 0
-    lam = -np.sum(np.cross(qh, t_dir) * qxR, axis=1)
-    return 1.0 if np.sum(lam > 0) >= np.sum(lam < 0) else -1.0
-
-
 def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_iter=1000, batch=8):
     """RANSAC over the 3-point known-vertical solver, scored by Sampson distance.
 
@@ -255,7 +235,10 @@ def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_i
     zhT, qhT = np.empty((3, n)), np.empty((3, n))  # homogeneous points, transposed
     zhT[:2], zhT[2] = z.T, 1.0
     qhT[:2], qhT[2] = q.T, 1.0
-    P = _level_points(L_k @ zhT, L_c @ qhT)
+    uwT = np.empty((6, n))
+    np.matmul(L_k, zhT, out=uwT[:3])  # levelled bearings u = L_k z^h, w = L_c q^h
+    np.matmul(L_c, qhT, out=uwT[3:])
+    P = _level_points(uwT)
     L_cT = L_c.T
     best = (-1, np.inf, None, None)  # count, truncated cost, psi, tau
     it = 0
@@ -295,14 +278,14 @@ def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_i
     num = M[0] * qhT[0]
     num += M[1] * qhT[1]
     num += M[2]
-    den = M[0] * M[0]
-    den += M[1] * M[1]
-    den += Et[0] * Et[0]
-    den += Et[1] * Et[1]
+    M2, Et2 = M[:2] * M[:2], np.square(Et, out=Et)
+    den = M2[0] + M2[1]
+    den += Et2[0]
+    den += Et2[1]
     np.sqrt(den, out=den)
     np.maximum(den, 1e-300, out=den)
     inliers = np.abs(num / den) < threshold
-    # keyframe depth lambda_k = -(q x t).(q x Rz)/|q x Rz|^2 must be > 0 (:func:`_cheirality_sign`)
+    # cheirality: keyframe depth lambda_k = -(q x t).(q x Rz)/|q x Rz|^2 > 0 for most inliers
     Q = qhT[_P12]  # q permuted by P1 and by P2
     qR = Q * M[3:]
     qR = qR[:3] - qR[3:]  # q x Rz
