@@ -109,7 +109,7 @@ def _solve_core(P, unit_tol=1e-3):
         roots = np.linalg.eigvals(Cmp)
     else:
         roots = np.full((B, 4), np.nan + 0j)
-        if np.any(good):
+        if good.any():
             cm = coeffs[good] / coeffs[good, :1]
             Cmp = _companion(cm.shape[0])
             Cmp[:, 0, :] = -cm[:, 1:]
@@ -118,7 +118,7 @@ def _solve_core(P, unit_tol=1e-3):
             r = np.roots(np.trim_zeros(coeffs[s] / scale[s], "f"))
             roots[s, : len(r)] = r
     on = np.abs(np.abs(roots) - 1.0) < unit_tol  # (false for the nan of missing roots)
-    sidx = np.nonzero(on)[0]
+    sidx = on.nonzero()[0]
     r = roots[on]
     psi = np.arctan2(r.imag, r.real)  # = np.angle
     H = len(psi)
@@ -131,7 +131,7 @@ def _solve_core(P, unit_tol=1e-3):
     g = g[:, :18] * g[:, 18:]
     cands = (g[:, :9] - g[:, 9:]).reshape(H, 3, 3)
     nr = np.sqrt(np.add.reduce(cands * cands, axis=2))  # = np.linalg.norm(cands, axis=2)
-    best = np.argmax(nr, axis=1)
+    best = nr.argmax(axis=1)
     ar = np.arange(H)
     tau = cands[ar, best]
     nb = nr[ar, best]
@@ -200,7 +200,8 @@ def _abs_sampson_t(E, zhT, qhT):
     den += Et[0]
     den += Et[1]
     np.sqrt(den, out=den)
-    np.maximum(den, 1e-300, out=den)
+    if den.min() < 1e-300:  # (a cheap test: np.maximum is the identity otherwise)
+        np.maximum(den, 1e-300, out=den)
     np.divide(num, den, out=num)
     return np.abs(num, out=num)
 
@@ -283,7 +284,8 @@ def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_i
     den += Et2[0]
     den += Et2[1]
     np.sqrt(den, out=den)
-    np.maximum(den, 1e-300, out=den)
+    if den.min() < 1e-300:
+        np.maximum(den, 1e-300, out=den)
     inliers = np.abs(num / den) < threshold
     # cheirality: keyframe depth lambda_k = -(q x t).(q x Rz)/|q x Rz|^2 > 0 for most inliers
     Q = qhT[_P12]  # q permuted by P1 and by P2

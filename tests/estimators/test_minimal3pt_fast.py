@@ -174,3 +174,16 @@ def test_single_sample_solver_unchanged():
     for (ps, td), p0, t0 in zip(sols, psi, tau):
         assert math.isclose(ps, p0, abs_tol=1e-12)
         assert np.allclose(td, s.L_c.T @ t0, rtol=0.0, atol=1e-12)
+
+
+def test_sampson_at_the_epipole():
+    # a point at the epipole of both views has E z^h = E^T q^h = 0: den = 0 -> the 1e-300 floor
+    t = np.array([0.5, -0.25, 1.0])  # (exact products: E z^h is exactly 0 there)
+    E = np.stack([skew(t), skew(t) @ rot_z(0.1)])
+    z = np.array([[0.5, -0.25], [0.1, 0.05], [-0.2, 0.3]])
+    q = np.array([[0.5, -0.25], [0.12, 0.04], [-0.25, 0.3]])
+    d0 = np.abs(sampson_distances(E, z, q))
+    assert d0[0, 0] == 0.0
+    zhT, qhT = np.ascontiguousarray(homogeneous(z).T), np.ascontiguousarray(homogeneous(q).T)
+    d1 = m3._abs_sampson_t(np.ascontiguousarray(np.swapaxes(E, 0, 1)), zhT, qhT)
+    assert np.array_equal(d1, d0)
