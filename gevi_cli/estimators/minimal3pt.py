@@ -247,7 +247,7 @@ def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_i
     while it < min(n_req, max_iter):
         B = min(batch, max_iter - it)
         idx = np.argsort(rng.random((B, n)), axis=1)[:, :3] if n <= 64 else _draw3(rng, n, B)
-        sidx, psi, tau, Rz = _solve_core(P[idx])
+        _, psi, tau, Rz = _solve_core(P[idx])
         it += B
         H = len(psi)
         if H == 0:

@@ -89,7 +89,7 @@ def _ref_ransac(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_iter=100
     while it < min(n_req, max_iter):
         B = min(batch, max_iter - it)
         idx = np.argsort(rng.random((B, n)), axis=1)[:, :3] if n <= 64 else _ref_draw3(rng, n, B)
-        sidx, psi, tau = _ref_solve_batch(u_all[idx], w_all[idx])
+        _, psi, tau = _ref_solve_batch(u_all[idx], w_all[idx])
         it += B
         if len(psi) == 0:
             continue
