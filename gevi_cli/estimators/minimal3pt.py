@@ -21,18 +21,51 @@ _ANG5 = 2.0 * np.pi * np.arange(5) / 5.0
 _RZ5 = rot_z(_ANG5)  # (5, 3, 3)
 _COS = np.cos(np.outer([1, 2], _ANG5))
 _SIN = np.sin(np.outer([1, 2], _ANG5))
-
-
-def _cross(a, b):
-    """np.cross for (..., 3) arrays without its axis-juggling overhead."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
-    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
-    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    return out
+_CS_T = np.ascontiguousarray(np.concatenate([_COS, _SIN]).T)  # (5, 4): f @ _CS_T = [a1, a2, b1, b2] * 5/2
 
 
 _RZ5T = np.ascontiguousarray(np.swapaxes(_RZ5, 1, 2))
+
+# The fast paths below evaluate every quantity with the very floating-point operations of the plain
+# formulas (each entry of a matrix product is the same 3-term dot product, cross products
+# a x b = a[P1] b[P2] - a[P2] b[P1] componentwise as in np.cross, sums over 3 terms left to right
+# as numpy reduces them), only laid out for fewer and larger numpy calls.
+_P1 = np.array([1, 2, 0])
+_P2 = np.array([2, 0, 1])
+_P12 = np.concatenate([_P1, _P2])
+_P21 = np.concatenate([_P2, _P1])
+# u @ _RZ5T_P12 = Rz(psi_k) u permuted by P1 and by P2 for the 5 sample angles: [l, (r, k, c)]
+_RZ5T_P12 = np.ascontiguousarray(_RZ5T[:, :, np.stack([_P1, _P2])].transpose(1, 2, 0, 3).reshape(3, 30))
+# Rz (3, 3) flattened -> Rz^T with its columns permuted by P1 and by P2, (3, 6): entry [l, (r, c)]
+_RZT_P12 = (3 * _P12[None, :] + np.arange(3)[:, None]).ravel()
+# the three pairwise cross products (rows 0x1, 0x2, 1x2) of a flattened (3, 3) matrix: the left and
+# right factors of the products a[P1] b[P2] and a[P2] b[P1]
+_I, _J, _C = np.repeat([0, 0, 1], 3), np.repeat([1, 2, 2], 3), np.tile(np.arange(3), 3)
+_PAIRS = np.concatenate([3 * _I + _P1[_C], 3 * _I + _P2[_C], 3 * _J + _P2[_C], 3 * _J + _P1[_C]])
+# skew(t)^T = skew(-t) flattened, from [t, -t, 0]
+_SKEW_T = np.array([6, 2, 4, 5, 6, 0, 1, 3, 6])
+_CMP = {}  # batch size -> companion-matrix template (ones on the subdiagonal)
+
+
+def _companion(B):
+    C = _CMP.get(B)
+    if C is None:
+        C = _CMP[B] = np.zeros((B, 4, 4), dtype=complex)
+        C[:, 1, 0] = C[:, 2, 1] = C[:, 3, 2] = 1.0
+    return C.copy()
+
+
+def _level_points(uwT):
+    """Per-point data of levelled bearings u, w given transposed and stacked, uwT (6, n) = [u^T; w^T],
+    for :func:`_solve_core`: (n, 11) array [u, w permuted by P2 then by P1, |u|, |w|]."""
+    P = np.empty((uwT.shape[1], 11))
+    P[:, :3] = uwT[:3].T
+    P[:, 3:9] = uwT[3 + _P21].T
+    x = (uwT * uwT).reshape(2, 3, -1)
+    x[:, 0] += x[:, 1]
+    x[:, 0] += x[:, 2]  # = np.add.reduce over the components (left to right)
+    P[:, 9:] = np.sqrt(x[:, 0]).T
+    return P
 
 
 def _solve_batch(u, w, unit_tol=1e-3):
@@ -40,43 +73,73 @@ def _solve_batch(u, w, unit_tol=1e-3):
 
     Returns (sample_index (H,), psi (H,), tau (H, 3) unit, in the level frame).
     """
-    B = u.shape[0]
-    Ru = np.matmul(u[:, None], _RZ5T[None])  # (B, 5, 3, 3): [s, k, j, :] = Rz(psi_k) u_sj
-    m = _cross(Ru, w[:, None, :, :])
-    f = np.linalg.det(m)  # (B, 5): f(psi_k)
-    a0 = f.mean(axis=1)
-    a = 2.0 / 5.0 * f @ _COS.T  # (B, 2): a1, a2
-    b = 2.0 / 5.0 * f @ _SIN.T  # (B, 2): b1, b2
-    c4 = (a[:, 1] - 1j * b[:, 1]) / 2.0
-    c3 = (a[:, 0] - 1j * b[:, 0]) / 2.0
-    coeffs = np.stack([c4, c3, a0 + 0j, np.conj(c3), np.conj(c4)], axis=1)  # (B, 5)
-    scale = np.max(np.abs(coeffs), axis=1)
-    ref = np.prod(np.linalg.norm(u, axis=2), axis=1) * np.prod(np.linalg.norm(w, axis=2), axis=1)
-    valid = scale > 1e-12 * ref  # f identically zero -> degenerate sample
-    roots = np.full((B, 4), np.nan + 0j)
-    good = valid & (np.abs(c4) > 1e-10 * scale)
-    if np.any(good):
-        cm = coeffs[good] / c4[good][:, None]
-        Cmp = np.zeros((cm.shape[0], 4, 4), dtype=complex)
-        Cmp[:, 0, :] = -cm[:, 1:]
-        Cmp[:, 1, 0] = Cmp[:, 2, 1] = Cmp[:, 3, 2] = 1.0
-        roots[good] = np.linalg.eigvals(Cmp)
-    for s in np.flatnonzero(valid & ~good):  # rare: vanishing leading coefficient
-        r = np.roots(np.trim_zeros(coeffs[s] / scale[s], "f"))
-        roots[s, : len(r)] = r
-    on = np.isfinite(roots) & (np.abs(np.abs(roots) - 1.0) < unit_tol)
-    sidx, ridx = np.nonzero(on)
-    psi = np.angle(roots[sidx, ridx])
+    u, w = np.asarray(u, dtype=float), np.asarray(w, dtype=float)
+    P = _level_points(np.concatenate([u.reshape(-1, 3).T, w.reshape(-1, 3).T])).reshape(u.shape[0], 3, 11)
+    sidx, psi, tau, _ = _solve_core(P, unit_tol)
+    return sidx, psi, tau
+
+
+def _solve_core(P, unit_tol=1e-3):
+    """:func:`_solve_batch` on per-point data P (B, 3, 11) of :func:`_level_points`.
+
+    Returns (sample_index (H,), psi (H,), tau (H, 3) unit, Rz(psi) (H, 3, 3)).
+    """
+    B = P.shape[0]
+    u, W = P[:, :, :3], P[:, :, 3:9]
+    # m[s, j, k] = Rz(psi_k) u_sj x w_sj, psi_k = 2 pi k / 5; f(psi_k) = det_j,c m[s, j, k, c]
+    G = (u.reshape(3 * B, 3) @ _RZ5T_P12).reshape(B, 3, 2, 5, 3)
+    G *= W.reshape(B, 3, 2, 1, 3)
+    f = np.linalg.det((G[:, :, 0] - G[:, :, 1]).transpose(0, 2, 1, 3))  # (B, 5): f(psi_k)
+    a0 = np.add.reduce(f, axis=1) / 5  # = f.mean(axis=1)
+    ab = 2.0 / 5.0 * f @ _CS_T  # (B, 4): a1, a2, b1, b2
+    c34 = (ab[:, :2] - 1j * ab[:, 2:]) / 2.0  # (B, 2): c3, c4
+    coeffs = np.empty((B, 5), dtype=complex)
+    coeffs[:, 0] = c34[:, 1]
+    coeffs[:, 1] = c34[:, 0]
+    coeffs[:, 2] = a0 + 0j
+    np.conjugate(c34, out=coeffs[:, 3:])
+    acoef = np.abs(coeffs)
+    scale = np.maximum.reduce(acoef, axis=1)
+    ref = np.multiply.reduce(P[:, :, 9:], axis=1)  # (B, 2): prod |u_j|, prod |w_j|
+    valid = scale > 1e-12 * (ref[:, 0] * ref[:, 1])  # f identically zero -> degenerate sample
+    good = valid & (acoef[:, 0] > 1e-10 * scale)
+    if good.all():
+        Cmp = _companion(B)
+        np.negative(coeffs[:, 1:] / coeffs[:, :1], out=Cmp[:, 0, :])
+        roots = np.linalg.eigvals(Cmp)
+    else:
+        roots = np.full((B, 4), np.nan + 0j)
+        if good.any():
+            cm = coeffs[good] / coeffs[good, :1]
+            Cmp = _companion(cm.shape[0])
+            Cmp[:, 0, :] = -cm[:, 1:]
+            roots[good] = np.linalg.eigvals(Cmp)
+        for s in np.flatnonzero(valid & ~good):  # rare: vanishing leading coefficient
+            r = np.roots(np.trim_zeros(coeffs[s] / scale[s], "f"))
+            roots[s, : len(r)] = r
+    on = np.abs(np.abs(roots) - 1.0) < unit_tol  # (false for the nan of missing roots)
+    sidx = on.nonzero()[0]
+    r = roots[on]
+    psi = np.arctan2(r.imag, r.real)  # = np.angle
+    H = len(psi)
     # translation direction from the two columns with the largest cross product
     Rp = rot_z(psi)
-    mm = _cross(np.matmul(u[sidx], np.swapaxes(Rp, 1, 2)), w[sidx])  # (H, 3, 3)
-    cands = np.stack([_cross(mm[:, 0], mm[:, 1]), _cross(mm[:, 0], mm[:, 2]), _cross(mm[:, 1], mm[:, 2])], 1)
-    nr = np.linalg.norm(cands, axis=2)
-    best = np.argmax(nr, axis=1)
-    tau = cands[np.arange(len(best)), best]
-    nb = nr[np.arange(len(best)), best]
+    G = np.matmul(u[sidx], Rp.reshape(H, 9)[:, _RZT_P12].reshape(H, 3, 6))  # Rz(psi) u_j permuted
+    G *= W[sidx]
+    mm = (G[:, :, :3] - G[:, :, 3:]).reshape(H, 9)  # rows Rz u_j x w_j
+    g = mm[:, _PAIRS]
+    g = g[:, :18] * g[:, 18:]
+    cands = (g[:, :9] - g[:, 9:]).reshape(H, 3, 3)
+    nr = np.sqrt(np.add.reduce(cands * cands, axis=2))  # = np.linalg.norm(cands, axis=2)
+    best = nr.argmax(axis=1)
+    ar = np.arange(H)
+    tau = cands[ar, best]
+    nb = nr[ar, best]
     ok = nb > 0
-    return sidx[ok], psi[ok], tau[ok] / nb[ok, None]
+    if not ok.all():
+        sidx, psi, tau, nb, Rp = sidx[ok], psi[ok], tau[ok], nb[ok], Rp[ok]
+    tau /= nb[:, None]
+    return sidx, psi, tau, Rp
 
 
 def solve_3pt_upright(z3, q3, L_k, L_c):
@@ -117,6 +180,32 @@ def _sampson_h(E, zh, qh):
     return num / np.maximum(den, 1e-300)
 
 
+def _abs_sampson_t(E, zhT, qhT):
+    """|Sampson distances| (H, n) of E given row-major as (3, H, 3) [row i, hypothesis, column], points
+    given transposed: zhT, qhT (3, n) contiguous.
+
+    The same operations as :func:`_sampson_h` (each entry of E z^h, E^T q^h is the same 3-term dot
+    product, num = (q0 (Ez)0 + q1 (Ez)1) + (Ez)2), laid out with the points along contiguous rows.
+    """
+    H = E.shape[1]
+    Ez = (E.reshape(3 * H, 3) @ zhT).reshape(3, H, -1)  # [i, h] = (E_h z^h)_i
+    Et = (E.transpose(2, 1, 0)[:2].reshape(2 * H, 3) @ qhT).reshape(2, H, -1)  # [k, h] = (E_h^T q^h)_k
+    num = Ez[0] * qhT[0]
+    num += Ez[1] * qhT[1]
+    num += Ez[2]
+    E01 = Ez[:2]
+    np.square(E01, out=E01)
+    np.square(Et, out=Et)
+    den = E01[0] + E01[1]
+    den += Et[0]
+    den += Et[1]
+    np.sqrt(den, out=den)
+    if den.min() < 1e-300:  # (a cheap test: np.maximum is the identity otherwise)
+        np.maximum(den, 1e-300, out=den)
+    np.divide(num, den, out=num)
+    return np.abs(num, out=num)
+
+
 def ransac_iterations(w, s=3, p=0.99) -> int:
     """N(s) = ceil(log(1-p) / log(1-w^s)) for inlier ratio w."""
     if w >= 1.0:
@@ -124,16 +213,6 @@ def ransac_iterations(w, s=3, p=0.99) -> int:
     if w <= 0.0:
         return 10**9
     return int(math.ceil(math.log(1.0 - p) / math.log(1.0 - w**s)))
-
-
-def _cheirality_sign(psi, t_dir, z, q, L_k, L_c):
-    R = np.asarray(L_c).T @ rot_z(psi) @ np.asarray(L_k)
-    Rz_ = homogeneous(z) @ R.T
-    qh = homogeneous(q)
-    qxR = np.cross(qh, Rz_)
-    # keyframe depth lambda_k = -(q x t).(q x Rz)/|q x Rz|^2 must be > 0
-    lam = -np.sum(np.cross(qh, t_dir) * qxR, axis=1)
-    return 1.0 if np.sum(lam > 0) >= np.sum(lam < 0) else -1.0
 
 
 def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_iter=1000, batch=8):
@@ -154,24 +233,36 @@ def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_i
     if threshold <= 0:
         raise DegenerateInput("threshold must be > 0")
     rng = np.random.default_rng(seed)
-    zh, qh = homogeneous(z), homogeneous(q)
-    u_all = zh @ L_k.T
-    w_all = qh @ L_c.T
+    zhT, qhT = np.empty((3, n)), np.empty((3, n))  # homogeneous points, transposed
+    zhT[:2], zhT[2] = z.T, 1.0
+    qhT[:2], qhT[2] = q.T, 1.0
+    uwT = np.empty((6, n))
+    np.matmul(L_k, zhT, out=uwT[:3])  # levelled bearings u = L_k z^h, w = L_c q^h
+    np.matmul(L_c, qhT, out=uwT[3:])
+    P = _level_points(uwT)
+    L_cT = L_c.T
     best = (-1, np.inf, None, None)  # count, truncated cost, psi, tau
     it = 0
     n_req = max_iter
     while it < min(n_req, max_iter):
         B = min(batch, max_iter - it)
         idx = np.argsort(rng.random((B, n)), axis=1)[:, :3] if n <= 64 else _draw3(rng, n, B)
-        sidx, psi, tau = _solve_batch(u_all[idx], w_all[idx])
+        _, psi, tau, Rz = _solve_core(P[idx])
         it += B
-        if len(psi) == 0:
+        H = len(psi)
+        if H == 0:
             continue
-        E = L_c.T @ skew(tau) @ rot_z(psi) @ L_k  # q^T E z = w^T [tau]x Rz u
-        d = np.abs(_sampson_h(E, zh, qh))  # (H, n)
-        inl = d < threshold
-        cnt = inl.sum(axis=1)
-        cost = np.sum(np.minimum(d, threshold) ** 2, axis=1)
+        # E = L_c^T [tau]x Rz(psi) L_k (q^T E z = w^T [tau]x Rz u), with L_c^T [tau]x = ([tau]x^T L_c)^T
+        T = np.empty((H, 7))
+        T[:, :3] = tau
+        np.negative(tau, out=T[:, 3:6])
+        T[:, 6] = 0.0
+        A = (T[:, _SKEW_T].reshape(3 * H, 3) @ L_c).reshape(H, 3, 3)
+        E = np.matmul(np.swapaxes(A, 1, 2), Rz).transpose(1, 0, 2) @ L_k  # (3, H, 3) [row, h, column]
+        d = _abs_sampson_t(E, zhT, qhT)  # (H, n)
+        cnt = np.add.reduce(d < threshold, axis=1, dtype=np.intp)  # = np.count_nonzero(., axis=1)
+        np.minimum(d, threshold, out=d)
+        cost = np.add.reduce(np.square(d, out=d), axis=1)
         h = np.lexsort((cost, -cnt))[0]
         if cnt[h] > best[0] or (cnt[h] == best[0] and cost[h] < best[1]):
             best = (int(cnt[h]), float(cost[h]), float(psi[h]), tau[h])
@@ -179,17 +270,45 @@ def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_i
     if best[2] is None:
         raise DegenerateInput("ransac_3pt_upright: no valid hypothesis")
     psi, tau = best[2], best[3]
-    t_dir = L_c.T @ tau
-    E = essential_upright(psi, t_dir, L_k, L_c)
-    inliers = np.abs(sampson_distances(E, z, q)) < threshold
-    t_dir = t_dir * _cheirality_sign(psi, t_dir, z[inliers], q[inliers], L_k, L_c)
+    t_dir = L_cT @ tau
+    R = L_cT @ rot_z(psi) @ L_k
+    E = skew(t_dir) @ R  # = essential_upright(psi, t_dir, L_k, L_c)
+    # one product for E z^h and, for the cheirality test, R z^h permuted by P2 and by P1
+    M = np.concatenate([E, R[_P21]]) @ zhT  # (9, n)
+    Et = E.T[:2] @ qhT
+    num = M[0] * qhT[0]
+    num += M[1] * qhT[1]
+    num += M[2]
+    M2, Et2 = M[:2] * M[:2], np.square(Et, out=Et)
+    den = M2[0] + M2[1]
+    den += Et2[0]
+    den += Et2[1]
+    np.sqrt(den, out=den)
+    if den.min() < 1e-300:
+        np.maximum(den, 1e-300, out=den)
+    inliers = np.abs(num / den) < threshold
+    # cheirality: keyframe depth lambda_k = -(q x t).(q x Rz)/|q x Rz|^2 > 0 for most inliers
+    Q = qhT[_P12]  # q permuted by P1 and by P2
+    qR = Q * M[3:]
+    qR = qR[:3] - qR[3:]  # q x Rz
+    qt = Q * t_dir[_P21, None]
+    qt = qt[:3] - qt[3:]  # q x t
+    qR *= qt
+    s = qR[0] + qR[1]
+    s += qR[2]  # = -lambda_k |q x Rz|^2
+    s = s[inliers]
+    if np.count_nonzero(s < 0) < np.count_nonzero(s > 0):
+        t_dir = -t_dir
     return psi, t_dir, inliers, it
+
+
+_DUP_A, _DUP_B = np.array([0, 0, 1]), np.array([1, 2, 2])
 
 
 def _draw3(rng, n, B):
     idx = rng.integers(0, n, size=(B, 3))
     for _ in range(100):
-        dup = (idx[:, 0] == idx[:, 1]) | (idx[:, 0] == idx[:, 2]) | (idx[:, 1] == idx[:, 2])
+        dup = (idx[:, _DUP_A] == idx[:, _DUP_B]).any(axis=1)
         if not dup.any():
             break
         idx[dup] = rng.integers(0, n, size=(int(dup.sum()), 3))
