@@ -5,12 +5,14 @@ Test helpers live here rather than in conftest.py because every folder has its o
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
-SHARED_DATA = REPO.parent / "shared" / "data"
+SHARED_DATA = Path(os.environ.get("GEVI_SHARED_DATA") or REPO.parent / "shared" / "data")
+"""The read-only data folder: ../shared/data next to the repo, or $GEVI_SHARED_DATA (e.g. from a worktree)."""
 
 
 def shared_path(*parts: str) -> Path:

@@ -38,6 +38,10 @@ class FrontendConfig:
     stereo_row_max_px: float = 1.5
     """Rectified stereo: a match must lie within this many pixels of the left feature's row."""
 
+    stereo_refine: bool = True
+    """Rectified stereo: refine each LK match by a 1-D LK along the left feature's row (level 0) and
+    put the right pixel on that row (:func:`~gevi_cli.frontend.stereo.refine_on_row`)."""
+
     min_depth_m: float = 0.5
     """Nearest accepted stereo depth (m): disparity <= fx * baseline / min_depth_m."""
 

@@ -26,7 +26,7 @@ from gevi_cli.frontend.grid import GridDetector, detect_grid
 from gevi_cli.frontend.image_frontend import STAGES, ImageFrontEnd
 from gevi_cli.frontend.klt import build_pyramid, track_lk
 from gevi_cli.frontend.rectify import Rectifier
-from gevi_cli.frontend.stereo import disparity_gate, hypotheses, match_stereo
+from gevi_cli.frontend.stereo import disparity_gate, hypotheses, match_stereo, refine_on_row
 
 CFG = FrontendConfig()
 FINE = replace(CFG, cell_px=16)
@@ -57,6 +57,40 @@ def test_lk_recovers_subpixel_translation():
     assert np.median(err) < 0.02
     assert np.percentile(err, 95) < 0.05
     assert np.isnan(uv_b[~ok]).all()
+
+
+def test_row_refinement_recovers_subpixel_disparity_under_gain():
+    """1-D LK on the row: exact sub-pixel disparity from a start 0.6 px off, the right image darker
+    (gain 0.8, offset +10); a flat patch (no horizontal texture) is refused."""
+    d_true = 12.37
+    left = texture(200, 320)
+    right = np.clip(np.round(0.8 * texture(200, 320, (-d_true, 0.0)).astype(float) + 10), 0, 255).astype(np.uint8)
+    right[:, :60] = 128  # flat: the points near the left border cannot be refined
+    uv = detect_grid(left, None, CFG)
+    uv = uv[(uv[:, 0] > 90) & (uv[:, 0] < 300)]
+    uv = np.vstack([uv, [[45.0, 100.0]]])  # its right patch (u - d = 33) lies in the flat band
+    d0 = np.full(len(uv), d_true + 0.6)
+    d, ok = refine_on_row(build_pyramid(left, CFG), build_pyramid(right, CFG), uv, d0, CFG)
+    assert not ok[-1] and ok[:-1].mean() > 0.95
+    err = np.abs(d[:-1][ok[:-1]] - d_true)
+    assert np.median(err) < 0.02 and np.percentile(err, 95) < 0.05
+
+
+def test_stereo_matches_lie_on_the_row_with_refinement():
+    left = texture(200, 320)
+    right = texture(200, 320, (-9.6, 0.3))  # a 0.3 px vertical misalignment: 2-D LK would follow it
+    uv = detect_grid(left, None, CFG)
+    pl, pr = build_pyramid(left, CFG), build_pyramid(right, CFG)
+    fake = type("Cam", (), {"fx": 400.0, "baseline": 0.1})()
+    uv_r, ok = match_stereo(pl, pr, uv, fake, CFG)
+    off, ok_off = match_stereo(pl, pr, uv, fake, replace(CFG, stereo_refine=False))
+    assert ok.mean() > 0.8 and ok_off.mean() > 0.8
+    assert (uv_r[ok, 1] == uv[ok, 1]).all()  # on the left feature's row
+    assert np.median(np.abs(off[ok_off, 1] - uv[ok_off, 1] - 0.3)) < 0.05  # 2-D LK: on the true row
+    # on the row, an oblique edge reads the vertical misalignment as a horizontal error (the price of
+    # the epipolar constraint); over the random orientations it averages out
+    err = uv[ok, 0] - uv_r[ok, 0] - 9.6
+    assert abs(err.mean()) < 0.05 and np.median(np.abs(err)) < 0.1
 
 
 def test_forward_backward_check_rejects_a_patch_replaced_by_noise():
