@@ -134,7 +134,7 @@ def match_stereo(pyr_left: Pyramid, pyr_right: Pyramid, uv_left: np.ndarray, cam
     (default 0); failures are retried from the :func:`hypotheses` ladder (``rungs=1``: prior only).
     ``gain``: compensate the global brightness difference first (:func:`match_gain`).
     With ``cfg.stereo_refine`` the accepted matches are refined on the row (:func:`refine_on_row`):
-    ``uv_right = (u_L - d, v_L)``, and those whose refinement fails are dropped.
+    ``uv_right = (u_L - d, v_L)``; where the refinement fails the 2-D match stays.
     """
     uv_left = np.asarray(uv_left, np.float64).reshape(-1, 2)
     n = len(uv_left)
@@ -167,7 +167,8 @@ def match_stereo(pyr_left: Pyramid, pyr_right: Pyramid, uv_left: np.ndarray, cam
         k = np.flatnonzero(ok)
         d, good = refine_on_row(pyr_left, pyr_right, uv_left[k], uv_left[k, 0] - uv_right[k, 0], cfg)
         good &= (d >= d_lo) & (d <= d_hi)
-        uv_right[k] = np.column_stack([uv_left[k, 0] - d, uv_left[k, 1]])
-        uv_right[k[~good]] = np.nan
-        ok[k[~good]] = False
+        # a failed refinement (weak horizontal texture: it did not converge or slid off) keeps the 2-D
+        # match: dropping those 3 % cost pool-hard_s1 (60 s, a turbid floor) 52 more IMU-only frames
+        # and its ATE went from 0.44 to 1.03 m; kitti06_head: RPE 0.0112 m against 0.0109 m
+        uv_right[k[good]] = np.column_stack([uv_left[k[good], 0] - d[good], uv_left[k[good], 1]])
     return uv_right, ok
