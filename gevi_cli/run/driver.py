@@ -149,7 +149,7 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
                 write_status(run_dir, status)
         if lost_open is not None:
             close_lost(max(stamps.values()) if stamps else 0)
-        emit_final(odometry.finish())
+        emit_final(odometry.finish(closing_ba=True))
         status.state = "lost-tracking" if status.lost_intervals else "ok"
         if status.lost_intervals:
             status.message = (f"tracking lost {len(status.lost_intervals)} time(s); {len(status.bridged_frames)} "

@@ -160,3 +160,30 @@ def test_black_frames_are_carried_by_the_imu_in_gevi(render, tmp_path, capsys):
     assert set(range(15, 20)) <= set(st["inertial_frames"]) and st["frames_tracked"] == 40
     assert "carried by the IMU alone" in stdout
     assert st["evaluation"]["ate_m"] < 0.05
+
+
+def test_frames_after_the_last_keyframe_get_the_closing_ba(render, tmp_path, capsys):
+    """A run that ends between keyframes closes that window with the BA (finish(closing_ba=True)):
+    the tail's written poses are the BA's, not the tracked ones; the frames before are untouched."""
+    import pandas as pd
+
+    full = tmp_path / "full"
+    assert run_cli(["run", render, "--method", "cfo", "-o", full, "-q"], capsys)[0] == 0
+    kf = pd.read_csv(full / "frames.csv").query("keyframe == 1")["index"].to_numpy()
+    gaps = [(a, b) for a, b in zip(kf[:-1], kf[1:]) if b - a >= 3]
+    assert gaps, "the render has no window of 3+ frames"
+    k0, k1 = gaps[0]
+    stop = k0 + 2  # ends two frames after keyframe k0, before k1
+    cut = tmp_path / "cut"
+    assert run_cli(["run", render, "--method", "cfo", "--max-frames", str(stop + 1), "-o", cut, "-q"], capsys)[0] == 0
+
+    def poses(d, name):
+        rows = [line.split() for line in (d / name).read_text().splitlines() if not line.startswith("#")]
+        return np.array([[float(v) for v in r[1:]] for r in rows])
+
+    after, online = poses(cut, "traj_body.tum"), poses(cut, "traj_online_body.tum")
+    assert len(after) == stop + 1
+    np.testing.assert_array_equal(after[: k0 + 1], poses(full, "traj_body.tum")[: k0 + 1])
+    assert np.abs(after[k0 + 1:] - online[k0 + 1:]).max() > 0  # the BA moved the tail
+    # its result is the BA of a full-length window: within a few mm of the tracked poses on this render
+    assert np.abs(after[k0 + 1:, :3] - online[k0 + 1:, :3]).max() < 5e-3
