@@ -116,9 +116,12 @@ class InitConfig:
 
     still_min_s: float = opt(1.0, "a standstill start is initialised after this long at rest (s); gravity and gyro "
                                   "bias are then re-estimated over the whole standstill while it lasts")
-    still_max_flow_px: float = opt(2.0, "at rest: image motion since the first frame below this (px: f x (rotation + "
+    still_max_flow_px: float = opt(2.0, "at rest: median displacement of the features tracked since the first frame below this (px) "
                                         "translation / median depth) of the tracked pose; "
                                         "EuRoC's MAV at rest jitters by up to 1.2 px, 0.15 deg)")
+    still_lag_s: float = opt(0.5, "the gyro bias of a standstill leaves out its last this many seconds (its end is "
+                                   "detected late)")
+    still_persist: int = opt(3, "... on this many consecutive frames before the images say 'moving'")
     still_max_gyro_std: float = opt(0.1, "at rest: gyro std per axis below this (rad/s; vibrating platforms reach "
                                          "0.06)")
     still_max_acc_std: float = opt(0.5, "at rest: std of |a| below this (m/s^2)")

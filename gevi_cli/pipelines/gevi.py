@@ -89,6 +89,9 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         self.first_kf_index: int | None = None
         self.T_first: np.ndarray | None = None  # pose of the first frame (in W once initialised)
         self.still = True  # the standstill that started the run is still going on
+        self.moving_run = 0  # consecutive frames whose image motion says "moving"
+        self.first_obs = None  # the first frame's features (the standstill's image reference)
+        self.moving_eval: tuple[int | None, bool] = (None, True)  # (frame index, images at rest) last evaluated
         self.init_poses: list[tuple[int, int, np.ndarray]] = []  # (index, t_ns, T_w_c) in V, tracked ones
         self.next_init_try: int | None = None
         self.init_info: dict = {}

@@ -100,6 +100,7 @@ class KeyframeOdometry:
         self.verification = None
         self._last = None  # (p, q) of the last tracked frame's verified matches
         self._tail = None  # (frame, FrameResult) of the last frame, for the closing BA of finish()
+        self.obs = None  # FeatureObs of the frame being tracked
         self._ba_longest = 0  # frames in the longest window bundle-adjusted so far
         self.ba_rejected = 0
         self.fallbacks = 0  # frames whose 6-DOF pose step started from SQPnP instead of Bias-Eli
@@ -115,6 +116,7 @@ class KeyframeOdometry:
         timings: dict[str, float] = {}
         t0 = time.perf_counter()
         obs = self.frontend.track(frame)
+        self.obs = obs  # the front end's features of this frame (ids, pixels), for what subclasses judge from them
         timings.update({f"fe_{k}": v for k, v in getattr(self.frontend, "timings", {}).items()})
         timings["frontend"] = time.perf_counter() - t0
         res = FrameResult(self.index, int(frame.t_ns), np.eye(4))
