@@ -146,8 +146,7 @@ class InertialInitialisation:
         (pool-hard_s3, 27 keyframe points, a keyframe every frame) the chained poses read 3.8 px of
         motion at rest by frame 1, the standstill was missed, and the moving-start initialisation at
         rest took a gyro bias 6.6e-3 rad/s off (tilt 11 deg after 60 s).  EuRoC's MAV at rest jitters by
-        up to 1.2 px (0.15 deg).  With fewer than 8 features left of the first frame's the images say
-        "moving" (a view that changed); a real start of motion grows monotonically and is caught
+        up to 1.2 px (0.15 deg).  A real start of motion grows monotonically and is caught
         ``still_persist - 1`` frames later, well inside ``still_min_s``."""
         if self.moving_eval[0] == res.index:  # evaluated once per frame (the counter must not double)
             return self.moving_eval[1]
@@ -158,16 +157,18 @@ class InertialInitialisation:
         return rest
 
     def _image_flow_px(self) -> float:
-        """Median displacement (px) of this frame's features since the first frame (inf: too few left)."""
+        """90th percentile of the displacement (px) of this frame's features since the first frame; 0 (the
+        images say nothing, the IMU decides) before any keyframe or with fewer than 8 features left of
+        the first frame's (a textureless floor loses its features at rest: pool-hard_s1)."""
         obs = self.obs
-        if obs is None:
+        if obs is None or self.first_kf_index is None:
             return 0.0
         if self.first_obs is None:
             self.first_obs = obs
             return 0.0
         common, i0, i1 = np.intersect1d(self.first_obs.ids, obs.ids, assume_unique=True, return_indices=True)
         if len(common) < 8:
-            return np.inf
+            return 0.0
         return float(np.percentile(np.linalg.norm(obs.uv[i1] - self.first_obs.uv[i0], axis=1), 90))
 
     def _still_since_start(self, res):
