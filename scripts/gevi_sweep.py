@@ -81,6 +81,8 @@ def main() -> int:
         for v in a.variants.split(","):
             rows.append(run_one(seq, v, a.out))
             r = rows[-1]
+            a.out.mkdir(parents=True, exist_ok=True)
+            pd.DataFrame(rows).to_csv(a.out / "sweep.csv", index=False)  # after every run: a killed sweep keeps its rows
             print(f"{r['sequence']:16s} {v:20s} ATE {r['ATE_mm']:8.3f} mm RPE {r['RPE_mm']:7.3f} mm tilt "
                   f"{r['tilt_deg']:.3f} deg ({r['tilt_first10_deg']:.3f} -> {r['tilt_last10_deg']:.3f}) "
                   f"{r['fps']:.1f} fps verify {r['verify_ms']:.2f} ms {r['tracked']} (inertial {r['inertial']})",
