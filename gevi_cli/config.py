@@ -52,9 +52,9 @@ def _coerce(value, typ, where: str):
     return value
 
 
-def check_choice(value: str, choices: tuple[str, ...], where: str) -> None:
+def check_choice(value, choices: tuple, where: str) -> None:
     if value not in choices:
-        raise GeviError(where, f"{value!r} is not one of {', '.join(choices)}")
+        raise GeviError(where, f"{value!r} is not one of {', '.join(map(str, choices))}")
 
 
 def override(cfg, data: dict, where: str):

@@ -371,14 +371,31 @@ def _sim(ctx, node, where) -> SimSpec:
                    moving_start=ctx.scalar(s, "moving_start", where, bool, False))
 
 
+def _entry_name(ctx, mapping, item, section: str) -> str:
+    """The required ``name:`` of an entry of ``section`` (sequences / baselines)."""
+    name = ctx.scalar(mapping, "name", f"{section}[]", str)
+    if not name:
+        raise ctx.err(item, f"{section}[].name", "missing")
+    return name
+
+
+def _known_names(ctx, node, where: str, known: set, not_a_list: str, unknown) -> tuple:
+    """A list of names each in ``known``; ``unknown(name)`` words the error for the first one that is not."""
+    names = _value(node)
+    if not isinstance(names, list) or not all(isinstance(x, str) for x in names):
+        raise ctx.err(node, where, not_a_list)
+    bad = [x for x in names if x not in known]
+    if bad:
+        raise ctx.err(node, where, unknown(bad[0]))
+    return tuple(names)
+
+
 def _sequences(ctx, node, cfg: BatchConfig) -> list:
     out = []
     method_names = {m.name for m in cfg.methods}
     for item in _seq_list(ctx, node, "sequences"):
         s = ctx.mapping(item, "sequences[]", SEQ_KEYS)
-        name = ctx.scalar(s, "name", "sequences[]", str)
-        if not name:
-            raise ctx.err(item, "sequences[].name", "missing")
+        name = _entry_name(ctx, s, item, "sequences")
         where = f"sequences.{name}"
         if slug(name) != name:
             raise ctx.err(s["name"][1], where, "use letters, digits and . _ + - only (it names folders)")
@@ -389,15 +406,9 @@ def _sequences(ctx, node, cfg: BatchConfig) -> list:
         optional = ctx.scalar(s, "optional", where, bool, False)
         methods = None
         if "methods" in s:
-            mnode = s["methods"][1]
-            methods = _value(mnode)
-            if not isinstance(methods, list) or not all(isinstance(x, str) for x in methods):
-                raise ctx.err(mnode, f"{where}.methods", "expected a list of method names")
-            unknown = [m for m in methods if m not in method_names]
-            if unknown:
-                raise ctx.err(mnode, f"{where}.methods", f"unknown method {unknown[0]!r}; the methods: are "
-                                                         f"{', '.join(sorted(method_names))}")
-            methods = tuple(methods)
+            methods = _known_names(
+                ctx, s["methods"][1], f"{where}.methods", method_names, "expected a list of method names",
+                lambda m: f"unknown method {m!r}; the methods: are {', '.join(sorted(method_names))}")
         skip = ""
         files = {}
         for key in ("path", "gt", "calib", "imu_calib"):
@@ -433,9 +444,7 @@ def _baselines(ctx, node, cfg: BatchConfig) -> list:
     seq_names = {s.name for s in cfg.sequences}
     for item in _seq_list(ctx, node, "baselines"):
         b = ctx.mapping(item, "baselines[]", BASELINE_KEYS)
-        name = ctx.scalar(b, "name", "baselines[]", str)
-        if not name:
-            raise ctx.err(item, "baselines[].name", "missing")
+        name = _entry_name(ctx, b, item, "baselines")
         where = f"baselines.{name}"
         path = ctx.scalar(b, "path", where, str)
         if not path or "{sequence}" not in path:
@@ -472,10 +481,8 @@ def _baselines(ctx, node, cfg: BatchConfig) -> list:
             T = str(p)
         seqs = None
         if "sequences" in b:
-            seqs = _value(b["sequences"][1])
-            if not isinstance(seqs, list) or any(x not in seq_names for x in seqs):
-                raise ctx.err(b["sequences"][1], f"{where}.sequences", "expected a list of names from sequences:")
-            seqs = tuple(seqs)
+            what = "expected a list of names from sequences:"
+            seqs = _known_names(ctx, b["sequences"][1], f"{where}.sequences", seq_names, what, lambda _: what)
         optional = ctx.scalar(b, "optional", where, bool, False)
         template = path
         root_part = cfg.resolve(template.split("{sequence}")[0] or ".")

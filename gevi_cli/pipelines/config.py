@@ -116,9 +116,9 @@ class InitConfig:
 
     still_min_s: float = opt(1.0, "a standstill start is initialised after this long at rest (s); gravity and gyro "
                                   "bias are then re-estimated over the whole standstill while it lasts")
-    still_max_flow_px: float = opt(2.0, "at rest: median displacement of the features tracked since the first frame below this (px) "
-                                        "translation / median depth) of the tracked pose; "
-                                        "EuRoC's MAV at rest jitters by up to 1.2 px, 0.15 deg)")
+    still_max_flow_px: float = opt(2.0, "at rest: 90th percentile of the displacement of the features tracked "
+                                        "since the first frame below this (px; EuRoC's MAV at rest jitters by up "
+                                        "to 1.2 px, 0.15 deg)")
     still_lag_s: float = opt(0.5, "the gyro bias of a standstill leaves out its last this many seconds (its end is "
                                    "detected late)")
     still_persist: int = opt(3, "... on this many consecutive frames before the images say 'moving'")
@@ -198,8 +198,7 @@ class OdometryConfig:
         check_choice(self.noise.method, NOISE_METHODS, f"{where}: noise.method")
         check_choice(self.ba.kernel, ("huber", "truncated", "none"), f"{where}: ba.kernel")
         check_choice(self.fusion.mode, ("bcd", "4dof"), f"{where}: fusion.mode")
-        if self.fusion.acc_order not in (0, 2, 3):
-            raise GeviError(f"{where}: fusion.acc_order", f"{self.fusion.acc_order!r} is not one of 0, 2, 3")
+        check_choice(self.fusion.acc_order, (0, 2, 3), f"{where}: fusion.acc_order")
         if not self.fusion.acc_window_s >= 0:
             raise GeviError(f"{where}: fusion.acc_window_s", f"must be >= 0 (s), got {self.fusion.acc_window_s}")
         return self

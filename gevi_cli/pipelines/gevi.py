@@ -91,7 +91,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         self.still = True  # the standstill that started the run is still going on
         self.moving_run = 0  # consecutive frames whose image motion says "moving"
         self.first_obs = None  # the first frame's features (the standstill's image reference)
-        self.moving_eval: tuple[int | None, bool] = (None, True)  # (frame index, images at rest) last evaluated
+        self.still_eval = None  # (frame index, _still_since_start's answer) of the last frame evaluated
         self.init_poses: list[tuple[int, int, np.ndarray]] = []  # (index, t_ns, T_w_c) in V, tracked ones
         self.next_init_try: int | None = None
         self.init_info: dict = {}
@@ -101,7 +101,8 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         self.innovations: list[tuple[int, np.ndarray]] = []  # (t_ns, a_dir - R_tilt(pred)^T e3) for Sigma's prior
         self.bias_poses: list[tuple[int, np.ndarray]] = []  # (t_ns, T_w_c) after the standstill, for b_a
         self.v_W = np.zeros(3)  # body velocity in W (m/s): from the visual track, carried by the IMU over losses
-        self.motion = RecentMotion(cfg.fusion.acc_window_s, cfg.fusion.acc_order)  # recent visually tracked body positions
+        # recent visually tracked body positions (velocity over IMU-only frames, acceleration compensation)
+        self.motion = RecentMotion(cfg.fusion.acc_window_s, cfg.fusion.acc_order)
 
     # --------------------------------------------------------------------------------- helpers
     def _levelling(self):

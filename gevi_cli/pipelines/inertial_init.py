@@ -148,13 +148,9 @@ class InertialInitialisation:
         rest took a gyro bias 6.6e-3 rad/s off (tilt 11 deg after 60 s).  EuRoC's MAV at rest jitters by
         up to 1.2 px (0.15 deg).  A real start of motion grows monotonically and is caught
         ``still_persist - 1`` frames later, well inside ``still_min_s``."""
-        if self.moving_eval[0] == res.index:  # evaluated once per frame (the counter must not double)
-            return self.moving_eval[1]
         moved = self._image_flow_px() > self.cfg.init.still_max_flow_px
         self.moving_run = self.moving_run + 1 if moved else 0
-        rest = self.moving_run < max(self.cfg.init.still_persist, 1)
-        self.moving_eval = (res.index, rest)
-        return rest
+        return self.moving_run < max(self.cfg.init.still_persist, 1)
 
     def _image_flow_px(self) -> float:
         """90th percentile of the displacement (px) of this frame's features since the first frame; 0 (the
@@ -172,11 +168,17 @@ class InertialInitialisation:
         return float(np.percentile(np.linalg.norm(obs.uv[i1] - self.first_obs.uv[i0], axis=1), 90))
 
     def _still_since_start(self, res):
-        """(images and IMU at rest since the first frame, the IMU samples (t, gyro, acc) since then)."""
+        """(images and IMU at rest since the first frame, the IMU samples (t, gyro, acc) since then).
+
+        Evaluated once per frame: the frame that initialises from the standstill asks again right after
+        (``_try_init``, then ``_update_standstill``), and the images' "moving" counter must count it once."""
+        if self.still_eval is not None and self.still_eval[0] == res.index:
+            return self.still_eval[1]
         ic = self.cfg.init
         ts, g, a = self.imu.window(self.t_first, res.t_ns)
         rest = self._images_at_rest(res) and (len(ts) < 2 or imu_at_rest(
             g, a, ic.still_max_gyro_std, ic.still_max_acc_std, ic.still_max_gravity_err))
+        self.still_eval = (res.index, (rest, (ts, g, a)))
         return rest, (ts, g, a)
 
     def _update_standstill(self, res) -> None:

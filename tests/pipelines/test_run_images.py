@@ -167,6 +167,8 @@ def test_frames_after_the_last_keyframe_get_the_closing_ba(render, tmp_path, cap
     the tail's written poses are the BA's, not the tracked ones; the frames before are untouched."""
     import pandas as pd
 
+    from gevi_cli.trajectory import read_trajectory
+
     full = tmp_path / "full"
     assert run_cli(["run", render, "--method", "cfo", "-o", full, "-q"], capsys)[0] == 0
     kf = pd.read_csv(full / "frames.csv").query("keyframe == 1")["index"].to_numpy()
@@ -178,8 +180,8 @@ def test_frames_after_the_last_keyframe_get_the_closing_ba(render, tmp_path, cap
     assert run_cli(["run", render, "--method", "cfo", "--max-frames", str(stop + 1), "-o", cut, "-q"], capsys)[0] == 0
 
     def poses(d, name):
-        rows = [line.split() for line in (d / name).read_text().splitlines() if not line.startswith("#")]
-        return np.array([[float(v) for v in r[1:]] for r in rows])
+        tr = read_trajectory(d / name, frame="body")
+        return np.column_stack([tr.positions, tr.quat_wxyz])
 
     after, online = poses(cut, "traj_body.tum"), poses(cut, "traj_online_body.tum")
     assert len(after) == stop + 1
