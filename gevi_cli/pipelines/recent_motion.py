@@ -32,20 +32,29 @@ class RecentMotion:
         self.keep_ns = max(VELOCITY_WINDOW_NS, self.acc_window_ns)
         self.t: list[int] = []
         self.p: list[np.ndarray] = []
+        self._arr: tuple[np.ndarray, np.ndarray] | None = None  # (t, p) as arrays, until the next add/reset
         self.power: list[tuple[int, float]] = []  # (t_ns, |a|^2 / 3 - var(a)) of recent estimates
 
     def reset(self) -> None:
         self.t, self.p = [], []
+        self._arr = None
 
     def add(self, t_ns: int, p_W: np.ndarray) -> None:
         keep = [k for k, t in enumerate(self.t) if t_ns - t <= self.keep_ns]
         self.t = [self.t[k] for k in keep] + [int(t_ns)]
         self.p = [self.p[k] for k in keep] + [np.asarray(p_W, dtype=float)]
+        self._arr = None
+
+    def _arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """The history as arrays, built once per added frame (the BCD window re-reads it several times)."""
+        if self._arr is None:
+            self._arr = (np.array(self.t, dtype=np.int64), np.array(self.p, dtype=float).reshape(-1, 3))
+        return self._arr
 
     def _since(self, t_ns: int, span_ns: int) -> tuple[np.ndarray, np.ndarray]:
-        t = np.array(self.t, dtype=np.int64)
+        t, P = self._arrays()
         sel = t_ns - t <= span_ns
-        return (t[sel] - t_ns) * 1e-9, np.array(self.p)[sel] if sel.any() else np.zeros((0, 3))
+        return (t[sel] - t_ns) * 1e-9, P[sel]
 
     def velocity(self) -> np.ndarray | None:
         """Line-fit velocity over the last 0.5 s (m/s), or None with less than 3 frames over 0.15 s."""
@@ -77,13 +86,13 @@ class RecentMotion:
         W = self.acc_window_ns
         if W <= 0 or not self.t:
             return np.zeros(3)
-        t = np.array(self.t, dtype=np.int64)
+        t, P_all = self._arrays()
         ahead = min(max(int(t[-1]) - int(t_ns), 0), W // 2)
         sel = (t >= t_ns - W + ahead) & (t <= t_ns + ahead)
         tau = (t[sel] - t_ns) * 1e-9
         if len(tau) < 6 or tau[-1] - tau[0] < 0.6 * W * 1e-9:
             return np.zeros(3)
-        P = np.array(self.p)[sel]
+        P = P_all[sel]
         P = P - P[-1]
         V3 = np.vander(tau, 4, increasing=True)
         c3, rss3, *_ = np.linalg.lstsq(V3, P, rcond=None)
