@@ -15,10 +15,18 @@ class FrontendConfig:
     """Grid cell side (px): at most one corner per cell, so features spread over the whole image."""
 
     quality: float = 0.01
-    """Shi-Tomasi quality level: a corner needs a minimum eigenvalue >= quality * the image's best."""
+    """Shi-Tomasi quality level: a corner needs a minimum eigenvalue >= quality * the reference score."""
+
+    quality_percentile: float = 100.0
+    """The reference score of ``quality``: this percentile of the grid cells' best scores (100 = the
+    image's strongest corner)."""
 
     min_distance_px: float = 8
     """Minimum distance (px) between a new corner and any other corner, new or tracked."""
+
+    shading_px: int = 0
+    """Illumination shading removal before detection, LK and stereo: subtract a local mean over a
+    square of this side (px; 0 = off, see :mod:`~gevi_cli.frontend.shading`).  For lamp-lit scenes."""
 
     lk_window: int = 21
     """Lucas-Kanade window side (px, odd), at every pyramid level."""
@@ -54,5 +62,8 @@ class FrontendConfig:
     def __post_init__(self):
         if self.cell_px < 1 or self.lk_window < 3 or self.lk_levels < 0 or self.lk_iters < 1:
             raise ValueError(f"invalid front-end config: {self}")
+        if not 0.0 < self.quality_percentile <= 100.0 or self.shading_px < 0:
+            raise ValueError(f"need 0 < quality_percentile <= 100 and shading_px >= 0, got "
+                             f"{self.quality_percentile}, {self.shading_px}")
         if not 0.0 < self.min_depth_m < self.max_depth_m:
             raise ValueError(f"need 0 < min_depth_m < max_depth_m, got {self.min_depth_m}, {self.max_depth_m}")

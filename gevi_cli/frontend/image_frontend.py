@@ -24,6 +24,7 @@ from gevi_cli.frontend.config import FrontendConfig
 from gevi_cli.frontend.grid import GridDetector
 from gevi_cli.frontend.klt import Pyramid, build_pyramid, track_lk
 from gevi_cli.frontend.rectify import Rectifier
+from gevi_cli.frontend.shading import remove_shading
 from gevi_cli.frontend.stereo import match_stereo
 from gevi_cli.frontend.types import FeatureObs, RectifiedStereo, StereoObs
 
@@ -74,7 +75,8 @@ class ImageFrontEnd:
             return self._stereo
         if self._right is None:  # first, so that a bad right image leaves the state untouched
             with self._timed("rectify"):
-                right = self.rectifier.right(self._image(frame, "right", t_ns))
+                right = remove_shading(self.rectifier.right(self._image(frame, "right", t_ns)),
+                                       self.cfg.shading_px)
             with self._timed("pyramid"):
                 self._right = build_pyramid(right, self.cfg)
         with self._timed("detect"):
@@ -120,7 +122,7 @@ class ImageFrontEnd:
             return t_ns
         raw = self._image(frame, "left", t_ns)
         with self._timed("rectify"):
-            left = self.rectifier.left(raw)
+            left = remove_shading(self.rectifier.left(raw), self.cfg.shading_px)
         with self._timed("pyramid"):
             pyr = build_pyramid(left, self.cfg)
         if self._left is None:

@@ -116,8 +116,8 @@ class InitConfig:
 
     still_min_s: float = opt(1.0, "a standstill start is initialised after this long at rest (s); gravity and gyro "
                                   "bias are then re-estimated over the whole standstill while it lasts")
-    still_max_flow_px: float = opt(2.0, "at rest: 90th percentile of the displacement of the features tracked "
-                                        "since the first frame below this (px; EuRoC's MAV at rest jitters by up "
+    still_max_flow_px: float = opt(2.0, "at rest: image motion since a reference frame below this (90th "
+                                        "percentile over the features of a fitted similarity transform, px; EuRoC's MAV at rest jitters by up "
                                         "to 1.2 px, 0.15 deg)")
     still_lag_s: float = opt(0.5, "the gyro bias of a standstill leaves out its last this many seconds (its end is "
                                    "detected late)")

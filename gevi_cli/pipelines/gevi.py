@@ -90,7 +90,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         self.T_first: np.ndarray | None = None  # pose of the first frame (in W once initialised)
         self.still = True  # the standstill that started the run is still going on
         self.moving_run = 0  # consecutive frames whose image motion says "moving"
-        self.first_obs = None  # the first frame's features (the standstill's image reference)
+        self.flow_ref = None  # features of the standstill test's reference frame (_image_flow_px)
         self.still_eval = None  # (frame index, _still_since_start's answer) of the last frame evaluated
         self.init_poses: list[tuple[int, int, np.ndarray]] = []  # (index, t_ns, T_w_c) in V, tracked ones
         self.next_init_try: int | None = None

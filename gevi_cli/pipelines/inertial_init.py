@@ -12,9 +12,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from gevi_cli import estimators as est
+from gevi_cli.frontend.image_motion import fitted_flow_px
 from gevi_cli.inertial.attitude import AttitudeFilterConfig, GravityAttitudeFilter, run_filter
 from gevi_cli.inertial.standstill import GRAVITY, imu_at_rest, tilt_from_specific_force
 from gevi_cli.pipelines.types import OK
+
+MIN_FLOW_FEATURES = 20
+"""Fewest features tracked since the first frame for the images to judge rest (see ``_image_flow_px``)."""
 
 INIT, STANDSTILL, GEVI, VISUAL = "init", "standstill", "gevi", "visual"
 
@@ -138,8 +142,8 @@ class InertialInitialisation:
         self.attitude = run_filter(f, ts, g, a)
 
     def _images_at_rest(self, res) -> bool:
-        """The images say the platform is at rest: the median displacement of the features tracked since
-        the first frame stays within ``init.still_max_flow_px``, or exceeds it on fewer than
+        """The images say the platform is at rest: the image motion since the reference frame
+        (``_image_flow_px``) stays within ``init.still_max_flow_px``, or exceeds it on fewer than
         ``init.still_persist`` consecutive frames.
 
         The flow is measured on the images themselves, not through the poses: on a turbid start
@@ -153,19 +157,31 @@ class InertialInitialisation:
         return self.moving_run < max(self.cfg.init.still_persist, 1)
 
     def _image_flow_px(self) -> float:
-        """90th percentile of the displacement (px) of this frame's features since the first frame; 0 (the
-        images say nothing, the IMU decides) before any keyframe or with fewer than 8 features left of
-        the first frame's (a textureless floor loses its features at rest: pool-hard_s1)."""
+        """Image motion (px) since the reference frame: :func:`~gevi_cli.frontend.image_motion.fitted_flow_px`
+        over this frame's features tracked since the reference.  The reference is the first frame with
+        features after the first keyframe; when fewer than ``MIN_FLOW_FEATURES`` of its features are
+        left, this frame becomes the reference (if it has that many).  0 (the images say nothing, the
+        IMU decides) before any keyframe, on a new reference, and with too few features.
+
+        Why fitted and re-referenced (docs/method.md, "Standstill"): LK-chained features random-walk,
+        on a faint floor by 3-5 px within 0.5 s at rest (pool-hard_s1), while a motion moves them
+        together; below 20 features the fit's own noise reached 3 px.  Abstaining once the first
+        frame's features are gone left the end of the standstill to the IMU's loose limits, which let
+        pool-hard_s1's smooth start of motion pass as rest for 0.9 s (1e-2 rad/s of yaw rate went into
+        the gyro bias).  A new reference forgets the motion before it: a start of motion outgrows the
+        limit within one reference's life, a creep slower than ``still_max_flow_px`` per reference
+        does not."""
         obs = self.obs
         if obs is None or self.first_kf_index is None:
             return 0.0
-        if self.first_obs is None:
-            self.first_obs = obs
+        ref = self.flow_ref
+        if ref is not None:
+            common, i0, i1 = np.intersect1d(ref.ids, obs.ids, assume_unique=True, return_indices=True)
+        if ref is None or len(common) < MIN_FLOW_FEATURES:
+            if len(obs.ids) >= MIN_FLOW_FEATURES:
+                self.flow_ref = obs
             return 0.0
-        common, i0, i1 = np.intersect1d(self.first_obs.ids, obs.ids, assume_unique=True, return_indices=True)
-        if len(common) < 8:
-            return 0.0
-        return float(np.percentile(np.linalg.norm(obs.uv[i1] - self.first_obs.uv[i0], axis=1), 90))
+        return fitted_flow_px(ref.uv[i0], obs.uv[i1])
 
     def _still_since_start(self, res):
         """(images and IMU at rest since the first frame, the IMU samples (t, gyro, acc) since then).
