@@ -3,7 +3,8 @@
 Pixels are pixels of the *rectified* images (:attr:`ImageFrontEnd.camera`); ids int64, increasing,
 never reused.  Per frame (protocol :class:`~gevi_cli.frontend.FrontEnd`):
 
-- ``track(frame)``: rectify the left image, LK from the previous frame (forward-backward checked),
+- ``track(frame)``: rectify the left image (and remove its lamp shading when ``shading_px`` is set,
+  :mod:`~gevi_cli.frontend.shading`), LK from the previous frame (forward-backward checked),
   drop the failures.  The first call detects instead.
 - ``keyframe(frame)`` (same frame, after ``track``): detect in the grid cells without a feature
   (new ids), rectify the right image and match all current features left -> right.  Only the

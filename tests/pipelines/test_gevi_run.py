@@ -164,6 +164,31 @@ def test_slow_moving_start_initialises_from_stereo_odometry(tmp_path, capsys):
     assert np.all(np.abs(s.loc[k, ["bgx", "bgy", "bgz"]].to_numpy(float) - gt[i, 11:14]) < 2e-3)
 
 
+def test_standstill_on_a_faint_lamp_lit_floor_ends_when_the_motion_starts(tmp_path, capsys):
+    """pool-hard seed 1 (a feature-poor floor under the vehicle's lamps; configs/pool.yaml removes the
+    shading): at rest for 1.5 s, then a smooth start.  The floor's faint features random-walk at rest
+    and most are lost within 0.5 s; the standstill must be recognised (not the moving-start
+    initialisation at rest) and must end within 0.5 s of the first motion, so that the gyro bias of
+    the standstill is within the issue's 2e-3 rad/s per axis (docs/method.md, 9b "Standstill start").
+    """
+    from gevi_cli.simulate.generate import SimulationConfig, simulate
+
+    seq = simulate(SimulationConfig("pool-hard", seed=1, duration_s=4.0), tmp_path / "ph", "euroc",
+                   progress=False, workers=1)
+    gt = np.loadtxt(seq / "mav0" / "state_groundtruth_estimate0" / "data.csv", delimiter=",", comments="#")
+    t = (gt[:, 0] - gt[0, 0]) * 1e-9
+    moved = np.linalg.norm(gt[:, 1:4] - gt[0, 1:4], axis=1) > 1e-4
+    t_start = t[np.argmax(moved)]
+    assert 1.0 < t_start < 2.5  # the render starts at rest (what this test is about)
+    code, _, err = run_cli(["run", seq, "-q", "-o", tmp_path / "r"], capsys)
+    assert code == 0, err
+    init = _status(tmp_path / "r")["imu"]["initialisation"]
+    assert init["method"] == "standstill"
+    assert t_start - 0.2 <= init["standstill_s"] <= t_start + 0.5
+    b_g = np.asarray(_status(tmp_path / "r")["imu"]["gyro_bias"])
+    assert np.all(np.abs(b_g - gt[0, 11:14]) < 2e-3), (b_g, gt[0, 11:14])
+
+
 def test_run_without_arguments_renders_the_sample_and_runs_gevi(monkeypatch, tmp_path, capsys):
     """`gevi run` alone: the sample is rendered on first use into the cache, GeVI runs on it and the
     ATE/RPE and roll/pitch lines are printed (a smaller sample here, the real one takes 11 s)."""
