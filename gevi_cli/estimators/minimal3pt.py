@@ -273,23 +273,10 @@ def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_i
     t_dir = L_cT @ tau
     R = L_cT @ rot_z(psi) @ L_k
     E = skew(t_dir) @ R  # = essential_upright(psi, t_dir, L_k, L_c)
-    # one product for E z^h and, for the cheirality test, R z^h permuted by P2 and by P1
-    M = np.concatenate([E, R[_P21]]) @ zhT  # (9, n)
-    Et = E.T[:2] @ qhT
-    num = M[0] * qhT[0]
-    num += M[1] * qhT[1]
-    num += M[2]
-    M2, Et2 = M[:2] * M[:2], np.square(Et, out=Et)
-    den = M2[0] + M2[1]
-    den += Et2[0]
-    den += Et2[1]
-    np.sqrt(den, out=den)
-    if den.min() < 1e-300:
-        np.maximum(den, 1e-300, out=den)
-    inliers = np.abs(num / den) < threshold
+    inliers = _abs_sampson_t(E[:, None, :], zhT, qhT)[0] < threshold
     # cheirality: keyframe depth lambda_k = -(q x t).(q x Rz)/|q x Rz|^2 > 0 for most inliers
     Q = qhT[_P12]  # q permuted by P1 and by P2
-    qR = Q * M[3:]
+    qR = Q * (R[_P21] @ zhT)  # with R z^h permuted by P2 and by P1
     qR = qR[:3] - qR[3:]  # q x Rz
     qt = Q * t_dir[_P21, None]
     qt = qt[:3] - qt[3:]  # q x t

@@ -18,7 +18,7 @@ from gevi_cli.inertial.standstill import GRAVITY, imu_at_rest, tilt_from_specifi
 from gevi_cli.pipelines.types import OK
 
 MIN_FLOW_FEATURES = 20
-"""Fewest features tracked since the first frame for the images to judge rest (see ``_image_flow_px``)."""
+"""Fewest features tracked since the reference frame for the images to judge rest (``_image_flow_px``)."""
 
 INIT, STANDSTILL, GEVI, VISUAL = "init", "standstill", "gevi", "visual"
 
