@@ -71,7 +71,10 @@ def override(cfg, data: dict, where: str):
             changes[key] = override(current, value, f"{where}: {key}")
         else:
             changes[key] = _coerce(value, types[key], f"{where}: {key}")
-    return dataclasses.replace(cfg, **changes)
+    try:
+        return dataclasses.replace(cfg, **changes)
+    except ValueError as err:  # a stage config's own check (__post_init__) refused the values
+        raise GeviError(where, str(err)) from None
 
 
 def parse_set(items: typing.Iterable[str]) -> dict:

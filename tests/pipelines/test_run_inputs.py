@@ -30,6 +30,10 @@ def test_set_and_shortcuts_override_in_order(capsys):
     (["--set", "keyframe.min_tracked=many"], "keyframe: min_tracked", "expected an integer"),
     (["--set", "pnp.method=magic"], "pnp.method", "is not one of"),
     (["--set", "justakey"], "--set", "expected stage.key=value"),
+    # a stage config's own range check (its __post_init__), not only the type
+    (["--set", "frontend.shading_px=-1"], "--set: frontend", "shading_px >= 0"),
+    (["--set", "frontend.quality_percentile=0"], "--set: frontend", "quality_percentile <= 100"),
+    (["--set", "frontend.cell_px=0"], "--set: frontend", "invalid front-end config"),
 ])
 def test_bad_set_is_one_line(args, where, what, capsys):
     code, _, err = run_cli(["run", "--dump-config"] + args, capsys)
