@@ -248,26 +248,31 @@ class BAProblem:
         self.ya = np.einsum("mij,mj->mi", M[ca], xa_h)  # M_a x_a (bearing in the frame of a's body)
         self.x0 = np.concatenate([euler_zyx_from_R(R0), t0], axis=1).reshape(-1)
         self.n_params = 6 * self.n_frames
-        # sparsity: residual depends on the 6 params of fa (if not KF1) and of fb
-        cols_a = 6 * self.fa[:, None] + np.arange(6)
-        cols_b = 6 * self.fb[:, None] + np.arange(6)
-        cols = np.concatenate([cols_a, cols_b], axis=1)
-        valid = np.concatenate([np.repeat(self.fa[:, None] >= 0, 6, 1), np.repeat(self.fb[:, None] >= 0, 6, 1)], 1)
-        self._valid = valid
-        self._rows = np.repeat(np.arange(self.m)[:, None], 12, 1)[valid]
-        self._cols = cols[valid]
         # per image pair (residuals are stored pair after pair): its slice, frames, camera offsets, and
-        # its 12 columns for the normal equations (invalid, i.e. KF1, entries point at column 0 with a
-        # zero value)
+        # its 12 columns for the normal equations (KF1's entries point at column 0 with a zero value)
         bounds = np.concatenate([[0], np.cumsum([k for _, _, k in used])])
         self._gslices = list(zip(bounds[:-1].tolist(), bounds[1:].tolist()))
         ga, gb = np.array([a for a, _, _ in used]), np.array([b for _, b, _ in used])
         self._gfa, self._gfb = self.slot_frame[ga], self.slot_frame[gb]
         self._gca, self._gcb, self._gMb = c[slot_cam[ga]], c[slot_cam[gb]], M[slot_cam[gb]]
-        self._gcols12 = np.where(valid, cols, 0)[bounds[:-1]]
+        six = np.arange(6)
+        self._gcols12 = np.concatenate([np.where(self._gfa[:, None] >= 0, 6 * self._gfa[:, None] + six, 0),
+                                        np.where(self._gfb[:, None] >= 0, 6 * self._gfb[:, None] + six, 0)], 1)
+        self._rows = None  # the sparse pattern, made when asked for (scipy solver, tests)
         self._ghidx = (self._gcols12[:, :, None] * self.n_params + self._gcols12[:, None, :]).reshape(-1)
 
+    def _sparsity(self):
+        """Row/column indices of the non-zero Jacobian entries: a residual depends on the 6 parameters
+        of frame a (if not KF1) and of frame b."""
+        if self._rows is None:
+            cols = np.concatenate([6 * self.fa[:, None] + np.arange(6), 6 * self.fb[:, None] + np.arange(6)], 1)
+            valid = np.concatenate([np.repeat(self.fa[:, None] >= 0, 6, 1), np.repeat(self.fb[:, None] >= 0, 6, 1)], 1)
+            self._valid = valid
+            self._rows = np.repeat(np.arange(self.m)[:, None], 12, 1)[valid]
+            self._cols = cols[valid]
+
     def jac_sparsity(self):
+        self._sparsity()
         return sp.csr_matrix((np.ones(self._rows.size), (self._rows, self._cols)), shape=(self.m, self.n_params))
 
     def _poses(self, x):
@@ -310,11 +315,13 @@ class BAProblem:
         dDb = np.einsum("gkij,gj->gki", dRb, self._gcb)
         out[:, 7:10] = RaT_ @ _skew(dDb) @ RbM_ + (RaT @ SD)[:, None] @ dRb @ self._gMb[:, None]
         out[:, 10:13] = -out[:, 4:7]  # dD/dt_b = e_j
+        out[self._gfa < 0, 1:7] = 0.0  # KF1 is fixed (its rotation derivatives are zero already)
+        out[self._gfb < 0, 7:13] = 0.0
         return out
 
     def _evaluate(self, x, jac):
         """Residuals d (m,) and, with ``jac``, the raw Jacobian blocks (m, 12) [a angles, a t, b
-        angles, b t] (entries of the fixed KF1 not yet zeroed)."""
+        angles, b t] (zero for the fixed KF1)."""
         Gm = self._group_matrices(x, jac)
         ng = Gm.shape[0]
         Gm = Gm.transpose(0, 2, 1, 3).reshape(ng, 3, 39) if jac else Gm
@@ -327,12 +334,10 @@ class BAProblem:
         d = e / n
         if not jac:
             return d, None
-        # dd/dp = (dl.x_b)/n - (l.x_b)(l1 dl1 + l2 dl2)/n^3  (dd/dl as in spec 6.3)
-        dl = L[:, 3:].reshape(self.m, 12, 3)
-        de = np.einsum("mkj,mj->mk", dl, self.xb)
-        dn = dl[:, :, 0] * l[:, :1] + dl[:, :, 1] * l[:, 1:2]
-        vals = de / n[:, None] - (e / n**3)[:, None] * dn
-        return d, vals
+        # dd/dp = dl/dp . dd/dl with dd/dl = x_b/n - (l.x_b)(l1, l2, 0)/n^3 (spec 6.3)
+        g = self.xb / n[:, None]
+        g[:, :2] -= (e / n**3)[:, None] * l[:, :2]
+        return d, np.einsum("mkj,mj->mk", L[:, 3:].reshape(self.m, 12, 3), g)
 
     def residuals(self, x):
         return self._evaluate(x, False)[0]
@@ -340,7 +345,8 @@ class BAProblem:
     def residuals_and_jacobian(self, x, sparse=False):
         d, vals = self._evaluate(x, True)
         if sparse == "raw":
-            return d, vals * self._valid
+            return d, vals
+        self._sparsity()
         if sparse:
             J = sp.csr_matrix((vals[self._valid], (self._rows, self._cols)), shape=(self.m, self.n_params))
         else:
