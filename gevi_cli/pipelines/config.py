@@ -159,6 +159,11 @@ class FusionConfig:
     acc_window_s: float = opt(0.4, "acceleration compensation [PROPOSAL]: the gravity residual removes the body "
                                    "acceleration fitted to the visually tracked positions of the last this many "
                                    "seconds from the specific force; 0: the paper's model (specific force only)")
+    gravity_window_s: float = opt(2.0, "window gravity [PROPOSAL]: the gravity direction of the gravity residual from "
+                                       "the visually tracked positions of the last this many seconds against the "
+                                       "twice-integrated IMU (pipelines/window_gravity.py), where the frames span at "
+                                       "least 1 s; elsewhere, and with 0, the specific force minus acc_window_s's "
+                                       "acceleration")
     acc_order: int = opt(0, "degree of that position fit: 0 chooses 2 or 3 per frame by the smaller estimated mean "
                             "squared error (the lag of 2 against the noise of 3); 2 or 3 forces it")
 

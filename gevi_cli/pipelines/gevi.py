@@ -45,6 +45,7 @@ from gevi_cli.pipelines.inertial_init import (GEVI, INIT, STANDSTILL, VISUAL, Fr
                                               tilt_of, yaw_of)
 from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches, _make_T
 from gevi_cli.pipelines.recent_motion import RecentMotion
+from gevi_cli.pipelines.window_gravity import WindowGravity
 from gevi_cli.pipelines.pose6 import opencv_pnp, reprojection_median_px, tracked_pose6
 from gevi_cli.pipelines.types import INERTIAL, OK
 from gevi_cli.pipelines.verification import FivePointL1Verification, ThreePointVerification, TrackingFailure
@@ -103,6 +104,8 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         self.v_W = np.zeros(3)  # body velocity in W (m/s): from the visual track, carried by the IMU over losses
         # recent visually tracked body positions (velocity over IMU-only frames, acceleration compensation)
         self.motion = RecentMotion(cfg.fusion.acc_window_s, cfg.fusion.acc_order)
+        # gravity in the body frame from the same frames and the preintegrated IMU (window_gravity.py)
+        self.wgrav = WindowGravity(cfg.fusion.gravity_window_s) if cfg.fusion.gravity_window_s > 0 else None
 
     # --------------------------------------------------------------------------------- helpers
     def _levelling(self):
@@ -119,9 +122,14 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         return a.mean(0) if len(a) else np.full(3, np.nan)
 
     def _acc_dir(self, t_ns: int, f_mean: np.ndarray, R_wb: np.ndarray | None = None) -> np.ndarray:
-        """Unit specific force at ``t_ns``, accelerometer bias removed and, given the body orientation
-        ``R_wb``, the visually tracked body acceleration too: the gravity direction alone
-        (``-R_wb^T g_W / g``)."""
+        """The gravity direction (``-R_wb^T g_W / g``, body frame) the gravity residual compares with at
+        ``t_ns``: from the window of tracked frames when it has that frame (window_gravity.py), else the
+        unit specific force, accelerometer bias removed and, given the body orientation ``R_wb``, the
+        visually tracked body acceleration too."""
+        if self.wgrav is not None and R_wb is not None:
+            up = self.wgrav.up(t_ns)
+            if up is not None:
+                return up
         a = f_mean - self.b_a
         if R_wb is not None:
             a = a - R_wb.T @ self.motion.acceleration(t_ns)
@@ -150,7 +158,12 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         if self.phase != INIT and self.T_w_last is not None and np.all(np.isfinite(rotvec)):
             R_wb = self.T_w_last[:3, :3] @ self.R_ic.T @ est.exp_so3(rotvec)
         f = self._f_mean(t_ns)
-        return FrameSample(index, t_ns, t_prev_ns, self._acc_dir(t_ns, f, R_wb), rotvec, dt, np.zeros(2), f, R_wb)
+        acc_dir = self._acc_dir(t_ns, f, R_wb)
+        if self.wgrav is not None and R_wb is not None and t_prev_ns is not None:
+            up = self.wgrav.up(t_prev_ns)  # the last tracked frame's, carried over by the gyro
+            if up is not None:
+                acc_dir = est.exp_so3(rotvec).T @ up
+        return FrameSample(index, t_ns, t_prev_ns, acc_dir, rotvec, dt, np.zeros(2), f, R_wb)
 
     # ------------------------------------------------------------------------------ main entry
     def track(self, frame):
@@ -228,9 +241,22 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         """Velocity from a line fit to the body positions of the last ~0.5 s of tracked frames."""
         if res.status != OK:
             self.motion.reset()
+            if self.wgrav is not None:
+                self.wgrav.reset()
             return
         T_B_C = np.asarray(self.camera.T_B_C0, dtype=float)
-        self.motion.add(res.t_ns, (res.T_w_c @ np.linalg.inv(T_B_C))[:3, 3])
+        T_wb = res.T_w_c @ np.linalg.inv(T_B_C)
+        self.motion.add(res.t_ns, T_wb[:3, 3])
+        if self.wgrav is not None:
+            pre = None
+            w = self.wgrav
+            if len(w) and self.t_prev is not None and int(w.t[-1]) == self.t_prev and self.imu.covers(self.t_prev, res.t_ns):
+                g, a, dts = imu_segment(self.imu.t_ns, self.imu.gyro, self.imu.acc, self.t_prev, res.t_ns)
+                pre = preintegrate(g, a, dts, self.b_g, self.b_a)
+            w.add(res.t_ns, T_wb[:3, 3], T_wb[:3, :3], pre)
+            up = w.up(res.t_ns)
+            if up is not None and self.cur is not None and self.cur.t_ns == res.t_ns:
+                self.cur.acc_dir = up
         v = self.motion.velocity()
         if v is not None:
             self.v_W = v
