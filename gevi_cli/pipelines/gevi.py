@@ -99,6 +99,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         self.gaps: list[dict] = []  # IMU gaps: {"first_index", "start_ns", "end_ns", "frames"}
         self.attitude = None  # AttitudeTrack of the IMU-only filter (fusion.mode = 4dof)
         self.bcd_ms = 0.0
+        self._fold = None  # (keyframe index, frames folded, their composed gyro rotation, their seconds): _bcd
         self.innovations: list[tuple[int, np.ndarray]] = []  # (t_ns, a_dir - R_tilt(pred)^T e3) for Sigma's prior
         self.bias_poses: list[tuple[int, np.ndarray]] = []  # (t_ns, T_w_c) after the standstill, for b_a
         self.v_W = np.zeros(3)  # body velocity in W (m/s): from the visual track, carried by the IMU over losses
@@ -393,11 +394,19 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
             # rotations composed, the variance summed) and their gravity residuals dropped
             drop = samples[1:len(samples) - cap + 2]
             first = samples[len(samples) - cap + 2]
-            R = np.eye(3)
-            for s in drop + [first]:
+            # the folded prefix only grows within a window: its product is kept, not recomposed per frame
+            # (the same products in the same order as composing them all again)
+            key = samples[0].index
+            if self._fold is None or self._fold[0] != key or self._fold[1] > len(drop):
+                self._fold = (key, 0, np.eye(3), 0.0)
+            _, k, R, dt = self._fold
+            for s in drop[k:]:
                 R = R @ est.exp_so3(s.rotvec)
+                dt += s.dt
+            self._fold = (key, len(drop), R, dt)
+            R = R @ est.exp_so3(first.rotvec)
             merged = FrameSample(first.index, first.t_ns, samples[0].t_ns, first.acc_dir, est.log_so3(R),
-                                 sum(s.dt for s in drop) + first.dt, first.tilt)
+                                 dt + first.dt, first.tilt)
             tail = samples[len(samples) - cap + 3:]
             samples = [samples[0], merged] + tail
             links = [merged.dt] + [s.dt for s in tail]
