@@ -206,6 +206,8 @@ class OdometryConfig:
         check_choice(self.fusion.acc_order, (0, 2, 3), f"{where}: fusion.acc_order")
         if not self.fusion.acc_window_s >= 0:
             raise GeviError(f"{where}: fusion.acc_window_s", f"must be >= 0 (s), got {self.fusion.acc_window_s}")
+        if not self.fusion.gravity_window_s >= 0:
+            raise GeviError(f"{where}: fusion.gravity_window_s", f"must be >= 0 (s), got {self.fusion.gravity_window_s}")
         return self
 
 

@@ -330,6 +330,11 @@ def _evaluate_tilt(run_dir: Path, gt, status, echo) -> None:
     from gevi_cli.evaluation.tilt import tilt_errors
     from gevi_cli.trajectory import read_trajectory
 
+    if status.imu and not status.imu.get("initialised", True):
+        # its poses are in the first camera's frame, so an angle to gravity would be meaningless
+        echo("roll/pitch not evaluated: the run ended before the stereo-IMU initialisation (its world is the "
+             "first camera frame, not gravity-aligned)")
+        return
     try:
         gt_traj, _ = load_groundtruth(Path(gt))
         te = tilt_errors(read_trajectory(run_dir / status.primary, frame="body"), gt_traj)

@@ -274,3 +274,19 @@ def test_window_gravity_on_an_accelerating_render_is_within_the_bias_of_the_trut
     rms = lambda x: float(np.sqrt(np.mean(np.square(x))))  # noqa: E731
     assert rms(err_w) <= rms(err_b) + 0.1, (rms(err_w), rms(err_b))
     assert rms(err_f) > 3.0 * rms(err_w) and max(err_f) > 2.0
+
+
+def test_a_run_that_ends_before_the_initialisation_has_no_roll_pitch_figure(pool_render, tmp_path, capsys):
+    """5 frames of the still start (0.5 s, less than the 1 s a standstill initialisation needs): the
+    poses are in the first camera's frame, so no angle to gravity is printed or recorded."""
+    code, out, err = run_cli(["run", pool_render, "--max-frames", "5", "-o", tmp_path / "r"], capsys)
+    assert code == 0, err
+    st = _status(tmp_path / "r")
+    assert st["imu"]["initialised"] is False
+    assert "roll/pitch not evaluated: the run ended before the stereo-IMU initialisation" in out
+    assert "tilt_rmse_deg" not in st["evaluation"] and "roll/pitch error" not in out
+
+
+def test_negative_gravity_window_is_one_line(pool_render, tmp_path, capsys):
+    code, _, err = run_cli(["run", pool_render, "--set", "fusion.gravity_window_s=-1", "-o", tmp_path / "r"], capsys)
+    assert code == 2 and "fusion.gravity_window_s" in err and len(err.strip().splitlines()) == 1, err
