@@ -43,7 +43,7 @@ import scipy.sparse as sp
 from scipy.optimize import least_squares
 
 from .errors import DegenerateInput, NonFiniteInput, ShapeError, TooFewPoints
-from .lie import homogeneous, rot_x, rot_y, rot_z
+from .lie import homogeneous, rot_x, rot_y, rot_z, skew
 
 __all__ = [
     "ImageObs",
@@ -58,15 +58,7 @@ __all__ = [
     "poses_from_tracking",
 ]
 
-def _skew(v):
-    """[v]x (..., 3, 3) of vectors v (..., 3)."""
-    S = np.zeros(v.shape + (3,))
-    S[..., 0, 1], S[..., 0, 2], S[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    S[..., 1, 0], S[..., 2, 0], S[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return S
-
-
-_SKEW_E = _skew(np.eye(3))  # [e_j]x for j = 0, 1, 2
+_SKEW_E = skew(np.eye(3))  # [e_j]x for j = 0, 1, 2
 
 # image slots: 0 = KF1-L, 1 = KF1-R, 2..K+1 = F_1..F_K left, K+2 = KF2-L, K+3 = KF2-R
 
@@ -298,7 +290,7 @@ class BAProblem:
         RaT = np.swapaxes(Ra, 1, 2)
         D = t[fb] + np.einsum("gij,gj->gi", Rb, self._gcb) - t[fa] - np.einsum("gij,gj->gi", Ra, self._gca)
         RbM = Rb @ self._gMb
-        SD = _skew(D)
+        SD = skew(D)
         G = RaT @ SD @ RbM
         if not derivs:
             return G
@@ -309,11 +301,11 @@ class BAProblem:
         RbM_ = RbM[:, None]
         # a side: d(R_a^T)/dk [D]x R_b M_b + R_a^T [dD]x R_b M_b with dD = -dR_a,k c_a
         dDa = -np.einsum("gkij,gj->gki", dRa, self._gca)
-        out[:, 1:4] = np.swapaxes(dRa, 2, 3) @ (SD @ RbM)[:, None] + RaT_ @ _skew(dDa) @ RbM_
+        out[:, 1:4] = np.swapaxes(dRa, 2, 3) @ (SD @ RbM)[:, None] + RaT_ @ skew(dDa) @ RbM_
         out[:, 4:7] = -(RaT_ @ _SKEW_E @ RbM_)  # dD/dt_a = -e_j
         # b side: R_a^T [dD]x R_b M_b with dD = dR_b,k c_b, plus R_a^T [D]x dR_b,k M_b
         dDb = np.einsum("gkij,gj->gki", dRb, self._gcb)
-        out[:, 7:10] = RaT_ @ _skew(dDb) @ RbM_ + (RaT @ SD)[:, None] @ dRb @ self._gMb[:, None]
+        out[:, 7:10] = RaT_ @ skew(dDb) @ RbM_ + (RaT @ SD)[:, None] @ dRb @ self._gMb[:, None]
         out[:, 10:13] = -out[:, 4:7]  # dD/dt_b = e_j
         out[self._gfa < 0, 1:7] = 0.0  # KF1 is fixed (its rotation derivatives are zero already)
         out[self._gfb < 0, 7:13] = 0.0
