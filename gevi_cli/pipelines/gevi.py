@@ -159,11 +159,13 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         if self.phase != INIT and self.T_w_last is not None and np.all(np.isfinite(rotvec)):
             R_wb = self.T_w_last[:3, :3] @ self.R_ic.T @ est.exp_so3(rotvec)
         f = self._f_mean(t_ns)
-        acc_dir = self._acc_dir(t_ns, f, R_wb)
+        acc_dir = None
         if self.wgrav is not None and R_wb is not None and t_prev_ns is not None:
             up = self.wgrav.up(t_prev_ns)  # the last tracked frame's, carried over by the gyro
             if up is not None:
                 acc_dir = est.exp_so3(rotvec).T @ up
+        if acc_dir is None:
+            acc_dir = self._acc_dir(t_ns, f, R_wb)
         return FrameSample(index, t_ns, t_prev_ns, acc_dir, rotvec, dt, np.zeros(2), f, R_wb)
 
     # ------------------------------------------------------------------------------ main entry

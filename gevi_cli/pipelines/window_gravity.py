@@ -44,6 +44,7 @@ class WindowGravity:
         self.reset()
 
     def reset(self) -> None:
+        self._memo: dict[int, np.ndarray | None] = {}  # up() of the frames kept, until the next add
         self.t = np.zeros(0, np.int64)
         self.p = np.zeros((0, 3))
         self.R = np.zeros((0, 3, 3))   # tracked body orientations in W
@@ -65,6 +66,7 @@ class WindowGravity:
             R0 = Rl @ pre.dR
             V0 = Vl + Rl @ pre.dv
             P0 = self.P0[-1] + Vl * pre.dt + Rl @ pre.dp
+        self._memo = {}
         self.t = np.append(self.t, np.int64(t_ns))
         self.p = np.vstack([self.p, np.asarray(p_W, float)[None]])
         self.R = np.concatenate([self.R, np.asarray(R_wb, float)[None]])
@@ -89,7 +91,15 @@ class WindowGravity:
 
     def up(self, t_ns: int) -> np.ndarray | None:
         """Up direction (unit, body frame) at the kept frame stamped ``t_ns``, or None: not kept, a window
-        shorter than ``min_span_s``, or a fitted ``|g|`` off by more than ``max_g_err`` (relative)."""
+        shorter than ``min_span_s``, or a fitted ``|g|`` off by more than ``max_g_err`` (relative).
+        Asked again before the next :meth:`add` (the pipeline asks for the last frame's twice), the
+        fit is not redone."""
+        key = int(t_ns)
+        if key not in self._memo:
+            self._memo[key] = self._up(key)
+        return self._memo[key]
+
+    def _up(self, t_ns: int) -> np.ndarray | None:
         r = np.flatnonzero(self.t == int(t_ns))
         if len(r) == 0 or self.t[-1] - self.t[0] < self.min_span_ns or len(self.t) < 6:
             return None
