@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-GRAVITY = 9.81
+from gevi_cli.inertial.standstill import GRAVITY
 
 
 class WindowGravity:
