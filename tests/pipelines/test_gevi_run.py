@@ -290,3 +290,42 @@ def test_a_run_that_ends_before_the_initialisation_has_no_roll_pitch_figure(pool
 def test_negative_gravity_window_is_one_line(pool_render, tmp_path, capsys):
     code, _, err = run_cli(["run", pool_render, "--set", "fusion.gravity_window_s=-1", "-o", tmp_path / "r"], capsys)
     assert code == 2 and "fusion.gravity_window_s" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_start_of_motion_after_the_standstill_is_not_read_as_gravity(pool_render, tmp_path, monkeypatch):
+    """The standstill test sees the start of motion late (here the render moves from 1.5 s, its
+    accelerations reach 0.2-0.5 m/s^2 within 0.3 s: 1-3 deg in the specific force).  The gravity
+    directions the BCD compares with on the frames still called at rest after the motion began must be
+    off the truth only by the accelerometer-bias error over g (the window gravity keeps running through
+    the standstill), not by the acceleration over g."""
+    from scipy.spatial.transform import Rotation as Rot
+
+    from gevi_cli.pipelines.gevi import GeviOdometry
+    from gevi_cli.run.session import RunRequest, execute
+
+    used = {}  # t_ns -> (acc_dir the BCD used, standstill?) for the current frame of each BCD call
+    real = GeviOdometry._bcd
+
+    def spy(self, m, cov, psi, t):
+        used[int(self.cur.t_ns)] = (self.cur.acc_dir.copy(), bool(self.still))
+        return real(self, m, cov, psi, t)
+
+    monkeypatch.setattr(GeviOdometry, "_bcd", spy)
+    execute(RunRequest(sequence=str(pool_render), method="gevi", out=str(tmp_path / "r"), quiet=True),
+            echo=lambda *a, **k: None)
+    gt = np.loadtxt(pool_render / "mav0" / "state_groundtruth_estimate0" / "data.csv", delimiter=",", comments="#")
+    b_a = np.asarray(_status(tmp_path / "r")["imu"]["acc_bias"])
+    dt = np.diff(gt[:, 0]).mean() * 1e-9
+    acc = np.linalg.norm(np.gradient(gt[:, 8:11], dt, axis=0), axis=1)  # |a| (m/s^2), W
+    moving_still, err, bound = 0, [], []
+    for t, (u, still) in used.items():
+        i = int(np.searchsorted(gt[:, 0], t))
+        if not still or acc[i] < 0.1:
+            continue
+        moving_still += 1
+        up = Rot.from_quat(gt[i, [5, 6, 7, 4]]).as_matrix().T @ [0.0, 0.0, 1.0]
+        err.append(np.degrees(np.arccos(min(1.0, u @ up))))
+        # the bias error over g (the standstill's b_a is the prior, 0) plus hundredths of position noise
+        bound.append(np.degrees(np.linalg.norm((b_a - gt[i, 14:17])[:2]) / 9.81) + 0.1)
+    assert moving_still >= 3, "the render no longer has a late-detected start of motion to test"
+    assert np.all(np.array(err) <= np.array(bound)), list(zip(err, bound))
