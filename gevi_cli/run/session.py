@@ -16,7 +16,15 @@ import numpy as np
 
 from gevi_cli.errors import GeviError
 
-CONFIG_DIR = Path(__file__).resolve().parents[2] / "configs"
+
+
+def config_dir() -> Path:
+    """The per-kind YAMLs: ``configs/`` of the source tree (a checkout, an editable install), else the
+    copy a wheel installs under ``<prefix>/share/gevi/configs`` (pyproject's data-files)."""
+    src = Path(__file__).resolve().parents[2] / "configs"
+    return src if (src / "pool.yaml").is_file() else Path(sys.prefix) / "share" / "gevi" / "configs"
+
+
 KIND_CONFIG = {"euroc": "euroc.yaml", "pool": "pool.yaml", "kitti": "kitti.yaml", "ov2slam-tracks": "kitti-tracks.yaml",
                "rosbag": "euroc.yaml"}
 
@@ -95,8 +103,11 @@ def resolve_config(req: RunRequest, kind: str | None, method: str = "cfo"):
     if METHOD_DEFAULTS.get(method):
         cfg = override(cfg, METHOD_DEFAULTS[method], f"{method} defaults")
         sources.append(f"{method} defaults")
-    kind_file = CONFIG_DIR / KIND_CONFIG.get(kind or "", "")
-    if kind and kind_file.is_file():
+    if kind in KIND_CONFIG:
+        kind_file = config_dir() / KIND_CONFIG[kind]
+        if not kind_file.is_file():
+            # a silent fallback to the defaults would run another method than the one documented
+            raise GeviError(kind_file, f"the configuration for {kind} sequences is missing (broken installation?)")
         cfg = override(cfg, load_yaml(kind_file), str(kind_file))
         sources.append(f"configs/{kind_file.name}")
     if req.config_file:
