@@ -63,6 +63,27 @@ def test_simulated_run_end_to_end(gevi_sim_run, pool_render):
     assert (states.phase == "gevi").sum() > n // 2
 
 
+def test_refined_accelerometer_bias_after_a_standstill_is_along_gravity(gevi_sim_run, pool_render):
+    """After a standstill start only the gravity component of the refined b_a is adopted: the horizontal
+    one is already in the standstill's tilt (spec 9.6).  The adopted bias is along the body's up
+    direction (the ground truth's, which the estimate is within a fraction of a degree of), and its
+    size is the refinement's projection on it."""
+    from scipy.spatial.transform import Rotation as Rot
+
+    st = _status(gevi_sim_run)
+    info = st["imu"]["initialisation"]["acc_bias_refined"]
+    assert "rejected" not in info, info
+    b, full = np.asarray(info["adopted"]), np.asarray(info["b_a"])
+    assert np.allclose(st["imu"]["acc_bias"], b, rtol=0, atol=1e-15)
+    gt = np.loadtxt(pool_render / "mav0" / "state_groundtruth_estimate0" / "data.csv", delimiter=",", comments="#")
+    t_first = int(pd.read_csv(pool_render / "mav0" / "cam0" / "data.csv").iloc[0, 0])
+    i = int(np.searchsorted(gt[:, 0], t_first + info["at_s"] * 1e9))
+    up = Rot.from_quat(gt[i, [5, 6, 7, 4]]).as_matrix().T @ [0.0, 0.0, 1.0]
+    tilt_err = np.radians(0.5)  # the estimated up against the truth's (the run's roll/pitch error is < 0.3 deg)
+    assert np.linalg.norm(b - up * (b @ up)) <= np.linalg.norm(b) * tilt_err + 1e-12
+    assert abs(b @ up - full @ up) <= np.linalg.norm(full) * tilt_err + 1e-12
+
+
 def test_written_trajectory_has_no_attitude_step_at_keyframes(tmp_path, capsys):
     """The gravity re-levelling of a keyframe is spread over the frames since the previous keyframe:
     the frame-to-frame rotation error of the steps that end at a keyframe is of the size of the others
