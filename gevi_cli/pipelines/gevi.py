@@ -208,7 +208,8 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
                 # also at rest: the window gravity then spans the start of motion, which the standstill
                 # test sees late (pool-easy_s1: 0.4 s, 0.2-0.44 m/s^2 read as gravity, 0.8 deg of pitch)
                 self._update_velocity(res)
-                self._refresh_acc_dirs()
+                if not self.still:  # at rest the later frames would not change the earlier frames' gravity
+                    self._refresh_acc_dirs()
             if self.still:
                 self.v_W = np.zeros(3)
             self._refine_acc_bias(res)
