@@ -244,28 +244,38 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         return T_new @ T_B_C, INERTIAL
 
     def _update_velocity(self, res) -> None:
-        """Velocity from a line fit to the body positions of the last ~0.5 s of tracked frames."""
+        """The tracked frame into the recent motion and the window gravity (whose answer becomes the
+        frame's gravity direction); the velocity from a line fit to the last ~0.5 s, except at rest."""
         if res.status != OK:
             self.motion.reset()
             if self.wgrav is not None:
                 self.wgrav.reset()
             return
-        T_B_C = np.asarray(self.camera.T_B_C0, dtype=float)
-        T_wb = res.T_w_c @ np.linalg.inv(T_B_C)
-        self.motion.add(res.t_ns, T_wb[:3, 3])
+        self._add_tracked(res.t_ns, res.T_w_c, self.t_prev)
         if self.wgrav is not None:
-            pre = None
-            w = self.wgrav
-            if len(w) and self.t_prev is not None and int(w.t[-1]) == self.t_prev and self.imu.covers(self.t_prev, res.t_ns):
-                g, a, dts = imu_segment(self.imu.t_ns, self.imu.gyro, self.imu.acc, self.t_prev, res.t_ns)
-                pre = preintegrate(g, a, dts, self.b_g, self.b_a)
-            w.add(res.t_ns, T_wb[:3, 3], T_wb[:3, :3], pre)
-            up = w.up(res.t_ns)
+            up = self.wgrav.up(res.t_ns)
             if up is not None and self.cur is not None and self.cur.t_ns == res.t_ns:
                 self.cur.acc_dir = up
+        if self.still:
+            return  # at rest: the velocity is zero, not the fit's
         v = self.motion.velocity()
         if v is not None:
             self.v_W = v
+
+    def _add_tracked(self, t_ns: int, T_w_c: np.ndarray, chain_from: int | None) -> None:
+        """A visually tracked frame (rectified cam0 pose ``T_w_c`` in W) for the recent-motion fit and the
+        window gravity; the window chains it to its last frame by the preintegrated IMU when that frame
+        is stamped ``chain_from`` and the IMU covers the interval, else starts a new history."""
+        T_wb = T_w_c @ np.linalg.inv(np.asarray(self.camera.T_B_C0, dtype=float))
+        self.motion.add(t_ns, T_wb[:3, 3])
+        w = self.wgrav
+        if w is None:
+            return
+        pre = None
+        if len(w) and chain_from is not None and int(w.t[-1]) == chain_from and self.imu.covers(chain_from, t_ns):
+            g, a, dts = imu_segment(self.imu.t_ns, self.imu.gyro, self.imu.acc, chain_from, t_ns)
+            pre = preintegrate(g, a, dts, self.b_g, self.b_a)
+        w.add(t_ns, T_wb[:3, 3], T_wb[:3, :3], pre)
 
     def _note_gap(self, res, gap: bool) -> None:
         if not gap or self.phase == INIT:

@@ -12,7 +12,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from gevi_cli import estimators as est
-from gevi_cli.estimators.preintegration import imu_segment, preintegrate
 from gevi_cli.frontend.image_motion import fitted_flow_px
 from gevi_cli.inertial.attitude import AttitudeFilterConfig, GravityAttitudeFilter, run_filter
 from gevi_cli.inertial.standstill import GRAVITY, imu_at_rest, tilt_from_specific_force
@@ -142,19 +141,11 @@ class InertialInitialisation:
         frame after the initialisation instead of a window length later (the frame ``index`` itself is
         added by ``_update_velocity``).  A standstill start is declared over late; without these frames
         the start of motion in between was read from the bare specific force."""
-        T_C_B = np.linalg.inv(np.asarray(self.camera.T_B_C0, dtype=float))
         prev = None
         for i, t_ns, T_vc in self.init_poses:
             if i >= index:
                 break
-            T_wb = T_WV @ T_vc @ T_C_B
-            self.motion.add(t_ns, T_wb[:3, 3])
-            if self.wgrav is not None:
-                pre = None
-                if prev is not None and prev[0] == i - 1 and self.imu.covers(prev[1], t_ns):
-                    g, a, dts = imu_segment(self.imu.t_ns, self.imu.gyro, self.imu.acc, prev[1], t_ns)
-                    pre = preintegrate(g, a, dts, self.b_g, self.b_a)
-                self.wgrav.add(t_ns, T_wb[:3, 3], T_wb[:3, :3], pre)
+            self._add_tracked(t_ns, T_WV @ T_vc, prev[1] if prev is not None and prev[0] == i - 1 else None)
             prev = (i, t_ns)
 
     def _start_attitude_filter(self, t_ns: int) -> None:

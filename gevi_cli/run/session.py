@@ -17,7 +17,6 @@ import numpy as np
 from gevi_cli.errors import GeviError
 
 
-
 def config_dir() -> Path:
     """The per-kind YAMLs: ``configs/`` of the source tree (a checkout, an editable install), else the
     copy a wheel installs under ``<prefix>/share/gevi/configs`` (pyproject's data-files)."""
