@@ -39,7 +39,9 @@ from .errors import DegenerateInput, NonFiniteInput, ShapeError
 from .lie import exp_so3, skew
 
 __all__ = [
+    "Increments",
     "Preintegrated",
+    "integrate_increments",
     "preintegrate",
     "preintegrate_batch",
     "preintegrate_reference",
@@ -132,14 +134,14 @@ def _bias(b, name):
     return b
 
 
-def _integrate(w, a, dt, b_g, b_a):
-    """Batched core: w, a (B, m, 3), dt (B, m), b_g, b_a (B, 3). Returns a dict of (B, ...) arrays."""
+def _integrate(w, a, dt, b_g, b_a, jacobians=True):
+    """Batched core: w, a (B, m, 3), dt (B, m), b_g, b_a (B, 3). Returns a dict of (B, ...) arrays
+    (without the bias Jacobians if ``jacobians`` is false: dt, dR, dv, dp by the same operations)."""
     B, m = dt.shape
     wh = w - b_g[:, None, :]
     ah = a - b_a[:, None, :]
     phi = wh * dt[..., None]
     E = exp_so3(phi)  # (B, m, 3, 3)
-    Jr = right_jacobian_batch(phi)
     # sequential part: running rotation product dR_0 = I, dR_{k+1} = dR_k E_k
     Rk = np.empty((B, m + 1, 3, 3))
     Rk[:, 0] = np.eye(3)
@@ -155,6 +157,9 @@ def _integrate(w, a, dt, b_g, b_a):
     v_excl = v_incl - fv
     dv = v_incl[:, -1]
     dp = np.sum(v_excl * dt1 + 0.5 * fv * dt1, axis=1)
+    if not jacobians:
+        return dict(dt=dt.sum(axis=1), dR=Rk[:, -1], dv=dv, dp=dp)
+    Jr = right_jacobian_batch(phi)
     # accelerometer-bias Jacobians
     Ra = R0 * dt2
     Jva_incl = -np.cumsum(Ra, axis=1)
@@ -188,6 +193,25 @@ def preintegrate(gyro, acc, dts, b_g=None, b_a=None) -> Preintegrated:
         **{k: (float(v[0]) if k == "dt" else v[0]) for k, v in out.items()},
         b_g=bg, b_a=ba, gyro=gyro, acc=acc, dts=dts,
     )
+
+
+@dataclass(frozen=True)
+class Increments:
+    """``dt`` [s], ``dR``, ``dv``, ``dp`` of one interval (frames as :class:`Preintegrated`), no Jacobians."""
+
+    dt: float
+    dR: np.ndarray
+    dv: np.ndarray
+    dp: np.ndarray
+
+
+def integrate_increments(gyro, acc, dts, b_g=None, b_a=None) -> Increments:
+    """The increments of :func:`preintegrate` (the same numbers) without the bias Jacobians: for a
+    caller that chains intervals at known biases and never corrects them (about half the work)."""
+    gyro, acc, dts = _check_samples(gyro, acc, dts)
+    bg, ba = _bias(b_g, "b_g"), _bias(b_a, "b_a")
+    out = _integrate(gyro[None], acc[None], dts[None], bg[None], ba[None], jacobians=False)
+    return Increments(float(out["dt"][0]), out["dR"][0], out["dv"][0], out["dp"][0])
 
 
 def preintegrate_batch(segments, b_g=None, b_a=None) -> list[Preintegrated]:

@@ -28,4 +28,16 @@ def fitted_flow_px(uv0: np.ndarray, uv1: np.ndarray, percentile: float = 90.0) -
     if M is None:
         return 0.0
     moved = uv0.astype(np.float64) @ M[:, :2].T + M[:, 2] - uv0
-    return float(np.percentile(np.linalg.norm(moved, axis=1), percentile))
+    return _percentile(np.linalg.norm(moved, axis=1), percentile)
+
+
+def _percentile(x: np.ndarray, percentile: float) -> float:
+    """``np.percentile(x, percentile)`` (linear interpolation) from the two order statistics it needs:
+    a partial sort instead of np.percentile's general machinery (~40 us of this per-frame test)."""
+    pos = (len(x) - 1) * (percentile / 100.0)
+    lo = int(np.floor(pos))
+    hi = min(lo + 1, len(x) - 1)
+    a, b = np.partition(x, [lo, hi])[[lo, hi]]
+    t = pos - lo
+    # numpy's lerp: exact at both ends
+    return float(b - (b - a) * (1.0 - t) if t >= 0.5 else a + (b - a) * t)

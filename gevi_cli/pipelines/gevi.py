@@ -37,7 +37,7 @@ import numpy as np
 
 from gevi_cli import estimators as est
 from gevi_cli.frontend import FrontEnd
-from gevi_cli.estimators.preintegration import imu_segment, preintegrate
+from gevi_cli.estimators.preintegration import imu_segment, integrate_increments
 from gevi_cli.inertial.imu_stream import ImuStream
 from gevi_cli.inertial.standstill import GRAVITY
 from gevi_cli.pipelines.config import OdometryConfig
@@ -232,7 +232,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         if self.phase == INIT or self.t_prev is None or not self.imu.covers(self.t_prev, t_ns):
             return super()._bridge(t_ns)
         g, a, dts = imu_segment(self.imu.t_ns, self.imu.gyro, self.imu.acc, self.t_prev, t_ns)
-        pre = preintegrate(g, a, dts, self.b_g, self.b_a)
+        pre = integrate_increments(g, a, dts, self.b_g, self.b_a)
         T_B_C = np.asarray(self.camera.T_B_C0, dtype=float)
         T_wb = self.T_w_last @ np.linalg.inv(T_B_C)
         R, p, T = T_wb[:3, :3], T_wb[:3, 3], pre.dt
@@ -274,7 +274,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         pre = None
         if len(w) and chain_from is not None and int(w.t[-1]) == chain_from and self.imu.covers(chain_from, t_ns):
             g, a, dts = imu_segment(self.imu.t_ns, self.imu.gyro, self.imu.acc, chain_from, t_ns)
-            pre = preintegrate(g, a, dts, self.b_g, self.b_a)
+            pre = integrate_increments(g, a, dts, self.b_g, self.b_a)
         w.add(t_ns, T_wb[:3, 3], T_wb[:3, :3], pre)
 
     def _note_gap(self, res, gap: bool) -> None:

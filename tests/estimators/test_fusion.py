@@ -236,6 +236,7 @@ def _bcd_dense(w, adaptive=True, max_iter=6, rel_tol=1e-6, lm_iters=2, mu0=1e-4)
     for _ in range(max_iter):
         start = cost
         for _ in range(lm_iters):
+            before = cost
             H, gvec = J.T @ J, J.T @ r
             dH = np.diag(H).copy()
             accepted = False
@@ -247,7 +248,7 @@ def _bcd_dense(w, adaptive=True, max_iter=6, rel_tol=1e-6, lm_iters=2, mu0=1e-4)
                     mu, accepted = max(mu / 10.0, 1e-12), True
                     break
                 mu *= 10.0
-            if not accepted:
+            if not accepted or before - cost < rel_tol * abs(before):
                 break
         hist.append(cost)
         if adaptive:

@@ -10,6 +10,7 @@ from gevi_cli.estimators import DegenerateInput, NonFiniteInput
 from gevi_cli.estimators.lie import exp_so3, log_so3
 from gevi_cli.estimators.preintegration import (
     imu_segment,
+    integrate_increments,
     preintegrate,
     preintegrate_batch,
     preintegrate_reference,
@@ -90,6 +91,21 @@ def test_vectorised_equals_literal_recursion_and_batch():
         for k in ("dR", "dv", "dp", "J_R_g", "J_v_g", "J_p_g", "J_p_a"):
             assert np.allclose(getattr(q, k), getattr(s, k), rtol=0, atol=1e-14), k
         assert q.dt == pytest.approx(s.dt)
+
+
+def test_increments_without_jacobians_are_preintegrations_numbers():
+    """integrate_increments skips only the Jacobians: dt, dR, dv, dp are the very same floats."""
+    rng = np.random.default_rng(4)
+    w, a = rng.normal(size=(12, 3)), rng.normal(size=(12, 3)) + [0, 0, 9.81]
+    d = rng.uniform(0.004, 0.006, 12)
+    d[3] = 0.0  # a zero hold time as imu_segment produces at an interval's end
+    bg, ba = rng.normal(size=3) * 0.05, rng.normal(size=3) * 0.1
+    p, q = preintegrate(w, a, d, bg, ba), integrate_increments(w, a, d, bg, ba)
+    assert q.dt == p.dt
+    for k in ("dR", "dv", "dp"):
+        assert np.array_equal(getattr(q, k), getattr(p, k)), k
+    with pytest.raises(DegenerateInput):
+        integrate_increments(w[:0], a[:0], d[:0])
 
 
 def test_bias_jacobians_vs_central_differences():

@@ -125,3 +125,14 @@ def test_fitted_flow_sees_a_common_motion_not_a_random_walk():
     assert abs(fitted_flow_px(p0, p1) - expect) < 0.01 * expect
     assert fitted_flow_px(p0, p0 + walk) == fitted_flow_px(p0, p0 + walk)  # seeded: same answer
     assert fitted_flow_px(p0[:2], p0[:2]) == 0.0
+
+
+def test_flow_percentile_is_numpys_to_the_bit():
+    """The standstill test's partial-sort percentile returns np.percentile's float (linear method)."""
+    from gevi_cli.frontend.image_motion import _percentile
+
+    rng = np.random.default_rng(7)
+    for n in (1, 2, 3, 10, 151, 226):
+        for q in (0.0, 37.5, 50.0, 90.0, 100.0):
+            x = rng.random(n) * 10.0
+            assert _percentile(x, q) == float(np.percentile(x, q)), (n, q)
