@@ -29,7 +29,6 @@ def runs(tmp_path_factory):
     out = {}
     for cameras in EXPORTS:
         d = tmp_path_factory.mktemp(f"kitti04_{cameras}")
-        capsys = None
         from gevi_cli.cli import main
 
         try:
