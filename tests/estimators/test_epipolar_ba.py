@@ -146,3 +146,21 @@ def test_input_errors():
     bad = BAWindow(empty, empty, [empty, empty], empty, empty, w.R_init, w.t_init, R_RL, T_RL)
     with pytest.raises(TooFewPoints):
         epipolar_local_ba(bad)
+
+
+def test_scale_is_unbiased_under_gaussian_noise():
+    """The BA's scale comes from the right-image pairs only; with Gaussian image noise it must not be
+    biased.  400 windows (K = 3, 1 px noise, perturbed start), the pipeline's kernel and stopping
+    rule: the mean ratio |t_KF2| / |t_KF2 true| is within 4 standard errors of 1, and those 4 SE
+    (~9e-4) are below the +0.15 % scale error the BA shows on the euroc-like renders
+    (docs/method.md, simulated sequences), so a bias of that size in the estimator fails here."""
+    ratios = []
+    for seed in range(400):
+        w, R, t = make_window(1000 + seed, K=3, sigma_px=1.0)
+        w = perturb(w, seed, t_sigma=0.02)
+        res = epipolar_local_ba(w, BAOptions(kernel="truncated", max_iter=10, tol=1e-4))
+        ratios.append(np.linalg.norm(res.t[-1]) / np.linalg.norm(t[-1]))
+    ratios = np.array(ratios)
+    se = ratios.std() / np.sqrt(len(ratios))
+    assert 4 * se < 1.5e-3, se
+    assert abs(ratios.mean() - 1.0) < 4 * se, (ratios.mean(), se)
