@@ -64,6 +64,9 @@ def main(argv=None) -> int:
     ap.add_argument("--span", type=int, default=4)
     ap.add_argument("--no-noise", action="store_true", help="re-render without sensor noise")
     ap.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--split-edges", type=float, default=0.02, metavar="REL",
+                    help="also report the features whose LK window (its corners and edge midpoints) "
+                         "spans depths differing by more than REL apart from the others")
     a = ap.parse_args(argv)
 
     from gevi_cli.datasets import open_sequence
@@ -93,6 +96,7 @@ def main(argv=None) -> int:
     disp_err, disp_true = [], []
     along = {m: [] for m in range(1, a.span + 1)}
     frac = {m: [] for m in range(1, a.span + 1)}
+    on_edge = {m: [] for m in range(1, a.span + 1)}
     for k0 in np.linspace(5, sim.frame_t_ns.size - a.span - 5, a.keyframes).astype(int):
         fe = ImageFrontEnd(seq.calibration, cfg.frontend)
         st = fe.keyframe(frame(k0))
@@ -107,6 +111,19 @@ def main(argv=None) -> int:
             return Xr, np.column_stack([cam.fx * Xr[:, 0] / Xr[:, 2] + cam.cx, cam.fy * Xr[:, 1] / Xr[:, 2] + cam.cy])
 
         X0, uv0 = project(k0)
+        # depth at the LK window's corners and edge midpoints: a window over an occlusion boundary
+        # tracks a blend of two motions, not the motion of the surface under its centre
+        h = cfg.frontend.lk_window // 2
+        zc = []
+        for du, dv in ((-h, -h), (0, -h), (h, -h), (-h, 0), (h, 0), (-h, h), (0, h), (h, h)):
+            xy_n = rect.rectified_to_raw_normalized(st.uv_left + [du, dv])
+            d_n = np.column_stack([xy_n, np.ones(len(xy_n))])
+            Pn = cast_to_scene(sim.scene, T_WC(k0), d_n / np.linalg.norm(d_n, axis=1)[:, None])
+            T0 = T_WC(k0)
+            zc.append((((Pn - T0[:3, 3]) @ T0[:3, :3]) @ rect.R0.T)[:, 2])
+        zc = np.array(zc)
+        with np.errstate(invalid="ignore"):
+            edge = ~np.all(np.abs(zc / X0[:, 2] - 1.0) <= a.split_edges, axis=0)
         ok = np.isfinite(X0[:, 2]) & (np.abs(uv0[:, 0] - st.uv_left[:, 0]) < 1e-3)
         d_t = cam.fx * cam.baseline / X0[ok, 2]
         disp_err.append((st.uv_left[ok, 0] - st.uv_right[ok, 0]) - d_t)
@@ -122,16 +139,19 @@ def main(argv=None) -> int:
             a_m = np.sum(e[good] * flow[good], axis=1) / fl[good]
             along[m].append(a_m)
             frac[m].append(a_m / fl[good])
+            on_edge[m].append(edge[i0][good])
 
     e, d = np.concatenate(disp_err), np.concatenate(disp_true)
     inl = np.abs(e) < 1.0
     print(f"stereo: {inl.sum()} of {len(e)} matches within 1 px; disparity error {_mean_se(e[inl])} px "
           f"(median disparity {np.median(d):.1f} px); relative depth error {_mean_se(-e[inl] / d[inl] * 100)} %")
-    print("| frames after the keyframe | tracks | error along the true flow, px | as % of the flow length |")
-    print("|---|---|---|---|")
+    print(f"| frames after the keyframe | tracks | error along the true flow, px | as % of the flow length | "
+          f"windows within {a.split_edges:.0%} in depth: tracks, % | the others: tracks, % |")
+    print("|---|---|---|---|---|---|")
     for m in range(1, a.span + 1):
-        x, f = np.concatenate(along[m]), np.concatenate(frac[m])
-        print(f"| {m} | {len(x)} | {_mean_se(x)} | {_mean_se(f * 100)} |")
+        x, f, g = np.concatenate(along[m]), np.concatenate(frac[m]), np.concatenate(on_edge[m])
+        print(f"| {m} | {len(x)} | {_mean_se(x)} | {_mean_se(f * 100)} | {(~g).sum()}, {_mean_se(f[~g] * 100)} | "
+              f"{g.sum()}, {_mean_se(f[g] * 100)} |")
     return 0
 
 
