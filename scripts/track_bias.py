@@ -54,7 +54,9 @@ def cast_to_scene(scene, T_WC: np.ndarray, d_C: np.ndarray) -> np.ndarray:
 
 
 def _mean_se(x: np.ndarray) -> str:
-    return f"{x.mean():+.4f} +- {x.std() / np.sqrt(max(len(x), 1)):.4f}"
+    if len(x) == 0:
+        return "-"
+    return f"{x.mean():+.4f} +- {x.std() / np.sqrt(len(x)):.4f}"
 
 
 def main(argv=None) -> int:
