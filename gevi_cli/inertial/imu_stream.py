@@ -6,6 +6,7 @@ force).  Stamps are int64 ns.  ``time_offset_s`` is Kalibr's ``timeshift_cam_imu
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -14,6 +15,7 @@ from gevi_cli import estimators as est
 from gevi_cli.datasets.sequence import IMU_GAP_FACTOR
 from gevi_cli.errors import GeviError
 from gevi_cli.estimators.preintegration import imu_segment
+from gevi_cli.inertial.standstill import WindowMoments
 
 #: EuRoC ADIS16448 values, used (with a warning) when the dataset states no IMU noise.
 DEFAULT_NOISE = {"gyro_noise_density": 1.6968e-4, "gyro_random_walk": 1.9393e-5, "acc_noise_density": 2.0e-3,
@@ -99,9 +101,18 @@ class ImuStream:
 
     def window(self, t0_ns: int, t1_ns: int):
         """(stamps, gyro, acc) with t0 <= t <= t1."""
-        i0 = int(np.searchsorted(self.t_ns, t0_ns, side="left"))
-        i1 = int(np.searchsorted(self.t_ns, t1_ns, side="right"))
+        i0, i1 = self.span(t0_ns, t1_ns)
         return self.t_ns[i0:i1], self.gyro[i0:i1], self.acc[i0:i1]
+
+    def span(self, t0_ns: int, t1_ns: int) -> tuple[int, int]:
+        """Index range [i0, i1) of the samples with t0 <= t <= t1."""
+        return (int(np.searchsorted(self.t_ns, t0_ns, side="left")),
+                int(np.searchsorted(self.t_ns, t1_ns, side="right")))
+
+    @functools.cached_property
+    def moments(self):
+        """:class:`~gevi_cli.inertial.standstill.WindowMoments` of the whole stream (built on first use)."""
+        return WindowMoments(self.gyro, self.acc)
 
     def interval(self, t0_ns: int, t1_ns: int, b_g: np.ndarray) -> FrameImu:
         """Gyro rotation over [t0, t1] (zero-order hold, bias ``b_g`` removed)."""

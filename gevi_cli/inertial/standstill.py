@@ -65,5 +65,49 @@ def imu_at_rest(gyro, acc, max_gyro_std: float, max_acc_std: float, max_gravity_
     if len(gyro) < 2:
         return False
     an = np.linalg.norm(acc, axis=1)
-    return bool(np.all(gyro.std(0) <= max_gyro_std) and an.std() <= max_acc_std
-                and abs(an.mean() - gravity) <= max_gravity_err)
+    return rest_limits_hold(gyro.std(0), an.std(), an.mean(), max_gyro_std, max_acc_std, max_gravity_err, gravity)
+
+
+def rest_limits_hold(gyro_std, acc_norm_std: float, acc_norm_mean: float, max_gyro_std: float, max_acc_std: float,
+                     max_gravity_err: float, gravity: float = GRAVITY) -> bool:
+    """The limits of :func:`imu_at_rest` on a window's statistics (rad/s, m/s^2)."""
+    return bool(np.all(np.asarray(gyro_std) <= max_gyro_std) and acc_norm_std <= max_acc_std
+                and abs(acc_norm_mean - gravity) <= max_gravity_err)
+
+
+class WindowMoments:
+    """Mean and (population) standard deviation of the gyro per axis and of |a| over any index range
+    of a stream, in O(1) per range from prefix sums built once (O(n)).
+
+    Why: the pipeline's standstill test asks for them over everything since the first frame, at every
+    frame while the standstill lasts; recomputed, that cost grew with the standstill (8 ms per frame
+    after 10 min at 200 Hz, 27 ms after 30 min: quadratic in its length).  The sums are of the samples
+    minus the first one, so the variance E[x^2] - E[x]^2 does not cancel the offset (|a| ~ 9.8,
+    std ~ 0.01): the rounding left is ~1e-16 of the spread's square, not of g^2.
+    """
+
+    def __init__(self, gyro, acc):
+        gyro = np.asarray(gyro, dtype=float)
+        an = np.linalg.norm(np.asarray(acc, dtype=float), axis=1)
+        self.g_ref, self.a_ref = gyro[0].copy(), float(an[0])
+        x, y = gyro - self.g_ref, an - self.a_ref
+
+        def prefix(v):
+            out = np.zeros((len(v) + 1,) + v.shape[1:])
+            np.cumsum(v, axis=0, out=out[1:])
+            return out
+
+        self._g1, self._g2, self._a1, self._a2 = prefix(x), prefix(x * x), prefix(y), prefix(y * y)
+
+    def gyro_mean(self, i0: int, i1: int) -> np.ndarray:
+        """Mean rate (3,) of samples i0 .. i1-1 (rad/s)."""
+        return self.g_ref + (self._g1[i1] - self._g1[i0]) / (i1 - i0)
+
+    def window(self, i0: int, i1: int):
+        """(gyro std (3,), |a| std, |a| mean) of samples i0 .. i1-1 (at least 1)."""
+        n = i1 - i0
+        gm = (self._g1[i1] - self._g1[i0]) / n
+        gv = (self._g2[i1] - self._g2[i0]) / n - gm * gm
+        am = (self._a1[i1] - self._a1[i0]) / n
+        av = (self._a2[i1] - self._a2[i0]) / n - am * am
+        return np.sqrt(np.maximum(gv, 0.0)), float(np.sqrt(max(av, 0.0))), self.a_ref + am

@@ -14,7 +14,7 @@ import numpy as np
 from gevi_cli import estimators as est
 from gevi_cli.frontend.image_motion import fitted_flow_px
 from gevi_cli.inertial.attitude import AttitudeFilterConfig, GravityAttitudeFilter, run_filter
-from gevi_cli.inertial.standstill import GRAVITY, imu_at_rest, tilt_from_specific_force
+from gevi_cli.inertial.standstill import GRAVITY, rest_limits_hold, tilt_from_specific_force
 from gevi_cli.pipelines.types import OK
 
 MIN_FLOW_FEATURES = 20
@@ -205,9 +205,11 @@ class InertialInitialisation:
         if self.still_eval is not None and self.still_eval[0] == res.index:
             return self.still_eval[1]
         ic = self.cfg.init
-        ts, g, a = self.imu.window(self.t_first, res.t_ns)
-        rest = self._images_at_rest(res) and (len(ts) < 2 or imu_at_rest(
-            g, a, ic.still_max_gyro_std, ic.still_max_acc_std, ic.still_max_gravity_err))
+        i0, i1 = self.imu.span(self.t_first, res.t_ns)
+        ts, g, a = self.imu.t_ns[i0:i1], self.imu.gyro[i0:i1], self.imu.acc[i0:i1]
+        # (the statistics from the stream's prefix sums: this window grows with the standstill)
+        rest = self._images_at_rest(res) and (len(ts) < 2 or rest_limits_hold(
+            *self.imu.moments.window(i0, i1), ic.still_max_gyro_std, ic.still_max_acc_std, ic.still_max_gravity_err))
         self.still_eval = (res.index, (rest, (ts, g, a)))
         return rest, (ts, g, a)
 
@@ -219,10 +221,11 @@ class InertialInitialisation:
             # IMU limits for a while), so the last ``init.still_lag_s`` do not enter the bias [PROPOSAL]:
             # pool-hard_s3 (yaw ramping up from rest) was called still for 1.8 s, 0.8 s longer than it
             # was, and its gyro bias came out 4.5e-3 rad/s off in z with them
-            keep = ts <= ts[-1] - int(self.cfg.init.still_lag_s * 1e9)
-            if (ts[keep][-1] - ts[0] if keep.sum() >= 2 else 0) < int(0.5 * self.cfg.init.still_min_s * 1e9):
-                keep = np.ones(len(ts), dtype=bool)
-            self.b_g = g[keep].mean(0)
+            k = int(np.searchsorted(ts, ts[-1] - int(self.cfg.init.still_lag_s * 1e9), side="right"))  # kept: ts[:k]
+            if (ts[k - 1] - ts[0] if k >= 2 else 0) < int(0.5 * self.cfg.init.still_min_s * 1e9):
+                k = len(ts)
+            i0 = int(np.searchsorted(self.imu.t_ns, ts[0], side="left"))
+            self.b_g = self.imu.moments.gyro_mean(i0, i0 + k)
             self.init_info["standstill_s"] = (ts[-1] - ts[0]) * 1e-9
         else:
             self.still = False
