@@ -87,24 +87,39 @@ class WindowMoments:
     """
 
     def __init__(self, gyro, acc):
-        gyro = np.asarray(gyro, dtype=float)
-        an = np.linalg.norm(np.asarray(acc, dtype=float), axis=1)
-        self.g_ref, self.a_ref = gyro[0].copy(), float(an[0])
-        x, y = gyro - self.g_ref, an - self.a_ref
+        self._gyro = np.asarray(gyro, dtype=float)
+        self._acc = np.asarray(acc, dtype=float)
+        self.g_ref = self._gyro[0].copy()
+        self.a_ref = float(np.linalg.norm(self._acc[0]))
+        # built as far as asked for, doubling: a standstill is the start of a stream, whose prefix sums
+        # over hours of a 1 kHz IMU would otherwise take ~0.7 GB
+        self._n = 0
+        self._g1, self._g2 = np.zeros((1, 3)), np.zeros((1, 3))
+        self._a1, self._a2 = np.zeros(1), np.zeros(1)
 
-        def prefix(v):
-            out = np.zeros((len(v) + 1,) + v.shape[1:])
-            np.cumsum(v, axis=0, out=out[1:])
-            return out
+    def _cover(self, i1: int) -> None:
+        if i1 <= self._n:
+            return
+        n = min(len(self._gyro), max(i1, 2 * self._n, 4096))
+        x = self._gyro[self._n:n] - self.g_ref
+        y = np.linalg.norm(self._acc[self._n:n], axis=1) - self.a_ref
 
-        self._g1, self._g2, self._a1, self._a2 = prefix(x), prefix(x * x), prefix(y), prefix(y * y)
+        def extend(prefix, v):
+            # one running sum continued from the last entry: the same additions in the same order
+            return np.concatenate([prefix[:-1], np.cumsum(np.concatenate([prefix[-1:], v]), axis=0)])
+
+        self._g1, self._g2 = extend(self._g1, x), extend(self._g2, x * x)
+        self._a1, self._a2 = extend(self._a1, y), extend(self._a2, y * y)
+        self._n = n
 
     def gyro_mean(self, i0: int, i1: int) -> np.ndarray:
         """Mean rate (3,) of samples i0 .. i1-1 (rad/s)."""
+        self._cover(i1)
         return self.g_ref + (self._g1[i1] - self._g1[i0]) / (i1 - i0)
 
     def window(self, i0: int, i1: int):
         """(gyro std (3,), |a| std, |a| mean) of samples i0 .. i1-1 (at least 1)."""
+        self._cover(i1)
         n = i1 - i0
         gm = (self._g1[i1] - self._g1[i0]) / n
         gv = (self._g2[i1] - self._g2[i0]) / n - gm * gm

@@ -78,3 +78,8 @@ def test_window_moments_are_numpys_mean_and_std_over_any_span():
         for limits in [(0.1, 0.5, 0.5), (0.029, 0.5, 0.5), (0.1, 0.019, 0.5), (0.1, 0.5, 0.01)]:
             assert rest_limits_hold(g_std, a_std, a_mean, *limits) == imu_at_rest(gyro[i0:i1], acc[i0:i1], *limits)
     assert s.span(5_000_000, 15_000_000) == (1, 4)  # t0 <= t <= t1, as window()
+    # built as far as asked for: growing in pieces gives the very sums of one pass
+    grown = ImuStream((np.arange(n) * 5e6).astype(np.int64), gyro, acc, NOISE).moments
+    for i1 in (3, 5000, 9000, 70_000, n):
+        grown.window(0, i1)
+    assert all(np.array_equal(getattr(grown, k), getattr(s.moments, k)) for k in ("_g1", "_g2", "_a1", "_a2"))
