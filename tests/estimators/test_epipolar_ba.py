@@ -152,8 +152,8 @@ def test_scale_is_unbiased_under_gaussian_noise():
     """The BA's scale comes from the right-image pairs only; with Gaussian image noise it must not be
     biased.  400 windows (K = 3, 1 px noise, perturbed start), the pipeline's kernel and stopping
     rule: the mean ratio |t_KF2| / |t_KF2 true| is within 4 standard errors of 1, and those 4 SE
-    (~9e-4) are below the +0.15 % scale error the BA shows on the euroc-like renders
-    (docs/method.md, simulated sequences), so a bias of that size in the estimator fails here."""
+    (~9e-4) are below 0.15 %, the size of the LK track shortening measured on the euroc-like renders
+    (docs/method.md, simulated sequences), so an estimator bias of that size fails here."""
     ratios = []
     for seed in range(400):
         w, R, t = make_window(1000 + seed, K=3, sigma_px=1.0)
