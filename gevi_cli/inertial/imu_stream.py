@@ -111,7 +111,7 @@ class ImuStream:
 
     @functools.cached_property
     def moments(self):
-        """:class:`~gevi_cli.inertial.standstill.WindowMoments` of the whole stream (built on first use)."""
+        """:class:`~gevi_cli.inertial.standstill.WindowMoments` of the stream (its sums grow as asked for)."""
         return WindowMoments(self.gyro, self.acc)
 
     def interval(self, t0_ns: int, t1_ns: int, b_g: np.ndarray) -> FrameImu:

@@ -77,7 +77,7 @@ def rest_limits_hold(gyro_std, acc_norm_std: float, acc_norm_mean: float, max_gy
 
 class WindowMoments:
     """Mean and (population) standard deviation of the gyro per axis and of |a| over any index range
-    of a stream, in O(1) per range from prefix sums built once (O(n)).
+    of a stream, in O(1) per range from prefix sums (built as far as the ranges asked for reach).
 
     Why: the pipeline's standstill test asks for them over everything since the first frame, at every
     frame while the standstill lasts; recomputed, that cost grew with the standstill (8 ms per frame
