@@ -221,11 +221,10 @@ class InertialInitialisation:
             # IMU limits for a while), so the last ``init.still_lag_s`` do not enter the bias [PROPOSAL]:
             # pool-hard_s3 (yaw ramping up from rest) was called still for 1.8 s, 0.8 s longer than it
             # was, and its gyro bias came out 4.5e-3 rad/s off in z with them
-            k = int(np.searchsorted(ts, ts[-1] - int(self.cfg.init.still_lag_s * 1e9), side="right"))  # kept: ts[:k]
-            if (ts[k - 1] - ts[0] if k >= 2 else 0) < int(0.5 * self.cfg.init.still_min_s * 1e9):
-                k = len(ts)
-            i0 = int(np.searchsorted(self.imu.t_ns, ts[0], side="left"))
-            self.b_g = self.imu.moments.gyro_mean(i0, i0 + k)
+            i0, i1 = self.imu.span(self.t_first, int(ts[-1]) - int(self.cfg.init.still_lag_s * 1e9))
+            if (self.imu.t_ns[i1 - 1] - ts[0] if i1 - i0 >= 2 else 0) < int(0.5 * self.cfg.init.still_min_s * 1e9):
+                i1 = i0 + len(ts)
+            self.b_g = self.imu.moments.gyro_mean(i0, i1)
             self.init_info["standstill_s"] = (ts[-1] - ts[0]) * 1e-9
         else:
             self.still = False
