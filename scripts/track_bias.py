@@ -76,7 +76,12 @@ def main(argv=None) -> int:
     from gevi_cli.run.session import RunRequest, resolve_config
     from gevi_cli.simulate.generate import SimulationConfig, build_sequence
 
-    meta = yaml.safe_load((a.render / "simulation.yaml").read_text())
+    spec = a.render / "simulation.yaml"
+    if not spec.is_file():
+        print(f"track_bias: error: {spec}: not found (RENDER must be a folder written by `gevi simulate`)",
+              file=sys.stderr)
+        return 2
+    meta = yaml.safe_load(spec.read_text())
     o = meta["options"]
     sim = build_sequence(SimulationConfig(meta["preset"], seed=int(meta["seed"]), duration_s=o["duration_s"],
                                           rate_hz=o["rate_hz"], resolution=tuple(o["resolution"]),
