@@ -141,12 +141,17 @@ def reprojection_residuals(R, t, p, q):
     return q - project(X), X
 
 
-def pnp6_refine(R, t, p, cov, q, sigma2_q=0.0, mu_rel=1e-6):
+def pnp6_refine(R, t, p, cov, q, sigma2_q=0.0, mu_rel=1e-6, return_step=False):
     """One weighted LM step on the reprojection error (spec 5.4) -> (R+, t+).
 
     Weights are Sigma_bar_i^-1 with Sigma_bar_i = J_h Sigma_i J_h^T (+ sigma2_q I, [PROPOSAL] for
     a noisy current frame), computed once at the input pose. Right perturbation:
     R+ = R Exp(delta[:3]), t+ = t + delta[3:]. Damping mu = mu_rel * max diag ([PROPOSAL] 1e-6).
+
+    ``return_step``: also return ``delta^T H delta`` (dimensionless), the squared length of the step
+    in the metric of the undamped normal matrix ``H = J^T W J``, i.e. in standard deviations of the
+    pose as the weights model it.  It tells whether the start was already within the noise (the
+    regime where one step is the efficient estimate) or not.
     """
     R = as_matrix(R, (3, 3), "R")
     t = as_matrix(t, (3,), "t")
@@ -183,9 +188,9 @@ def pnp6_refine(R, t, p, cov, q, sigma2_q=0.0, mu_rel=1e-6):
     J2, WJ2 = J.reshape(2 * n, 6), WJ.reshape(2 * n, 6)
     Hm = WJ2.T @ J2
     g = WJ2.T @ r.reshape(2 * n)
-    Hm = Hm + mu_rel * np.max(np.diag(Hm)) * np.eye(6)
-    delta = solve_checked(Hm, g, "pnp6_refine")
-    return R @ exp_so3(delta[:3]), t + delta[3:]
+    delta = solve_checked(Hm + mu_rel * np.max(np.diag(Hm)) * np.eye(6), g, "pnp6_refine")
+    out = R @ exp_so3(delta[:3]), t + delta[3:]
+    return (*out, float(delta @ Hm @ delta)) if return_step else out
 
 
 def pnp6_l1(p, q):

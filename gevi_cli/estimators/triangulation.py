@@ -68,16 +68,26 @@ def triangulate_jacobian(z, y, R_rl, t_rl):
     return p, J
 
 
-def triangulate(z, y, R_rl, t_rl, sigma2):
+def triangulate(z, y, R_rl, t_rl, sigma2, tied_rows=None):
     """Triangulate stereo matches and propagate isotropic image noise.
 
     ``sigma2``: variance of each normalized coordinate of z and y (e.g. from
     :func:`sigma2_stereo`). Returns ``p`` (n, 3) in keyframe-left coordinates and
     ``cov`` (n, 3, 3) = sigma2 * J_p J_p^T, evaluated at the measured coordinates.
+
+    ``tied_rows`` (n,) bool, optional: matches whose right row is the left row by construction (a
+    rectified pair matched along the row, ``y2 = z2``).  Their ``y2`` is no second measurement, so
+    ``d p / d z2`` becomes the total derivative ``J[:, :, 1] + J[:, :, 3]`` and ``y2`` contributes no
+    variance of its own [PROPOSAL; spec 4 assumes four independent coordinates].  Counting it as
+    independent adds variance the data do not have (docs/method.md 5.4).
     """
     sigma2 = finite_scalar(sigma2, "sigma2")
     if sigma2 < 0:
         raise DegenerateInput("triangulate: negative sigma2")
     p, J = triangulate_jacobian(z, y, R_rl, t_rl)
+    if tied_rows is not None:
+        tied = np.asarray(tied_rows, dtype=bool)
+        J[tied, :, 1] += J[tied, :, 3]
+        J[tied, :, 3] = 0.0
     cov = sigma2 * J @ np.swapaxes(J, 1, 2)
     return p, cov

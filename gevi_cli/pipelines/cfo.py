@@ -1,7 +1,7 @@
 """CurrentFeature Odometry (stereo only; "Bias-Eliminated PnP for Stereo Visual Odometry").
 
 Per frame (spec 2): LK tracks -> 5-point RANSAC -> l1-PnP drop of the worst 10 % -> noise variance
--> Bias-Eli-W PnP (bias-eliminated linear step + one weighted LM step) against the points of the
+-> Bias-Eli-W PnP (bias-eliminated linear step + the weighted LM step(s) of pose6) against the points of the
 current keyframe only; at each new keyframe the epipolar local BA.  Everything but the two pipeline
 choices (verification, pose) lives in :class:`~gevi_cli.pipelines.odometry.KeyframeOdometry`.
 """

@@ -61,15 +61,25 @@ class PnPConfig:
 
     method: str = opt("be-w", "'be-w' (Bias-Eli + weighted LM step), 'be' (Bias-Eli only), 'ls' (CPnP LS + "
                               "weighted step), 'epnp' / 'sqpnp' (OpenCV + LM)")
-    refine_steps: int = opt(1, "weighted LM steps after the linear estimate (the method: 1, S2 argues one step is "
-                                "asymptotically enough; on planar pool floors 3 steps measured better)")
+    refine_steps: int = opt(1, "weighted LM steps after the linear estimate at least (the method: 1, S2 argues one "
+                                "step is asymptotically enough from a start within the noise)")
+    step_tol: float = opt(4.0, "[PROPOSAL] ... then further steps while the last one was longer than this in the "
+                               "pose's own metric (delta^T H delta, i.e. squared standard deviations): the start "
+                               "was not within the noise, as on planar floors where the linear model is "
+                               "degenerate; 0: exactly refine_steps steps")
+    max_refine_steps: int = opt(10, "at most this many weighted steps")
     depth_weights: bool = opt(False, "linear-step row weights Z^-3/2 (the authors' code) instead of 1")
-    current_noise: bool = opt(False, "add the current-frame noise sigma^2 I to the step's weights (spec 5.4)")
+    current_noise: bool = opt(True, "add the current-frame noise sigma^2 I to the step's weights (spec 5.4 "
+                                    "[PROPOSAL]: every image is noisy in real data; docs/method.md 5.4)")
     min_points: int = opt(12, "fewer verified matches than this is a tracking failure")
     fallback_sigmas: float = opt(4.0, "be-w/ls: when the median reprojection error after the step exceeds this many "
                                       "noise std (the linear model is degenerate for coplanar points), the step is "
                                       "redone from SQPnP and the better pose kept; 0: never")
     fallback_min_px: float = opt(0.5, "... but never below this error (px)")
+    reverify: bool = opt(True, "[PROPOSAL] when the tracked pose's median reprojection error still exceeds that limit, "
+                               "drop the outliers of a 3D-2D RANSAC (OpenCV AP3P) and redo the pose; the better "
+                               "pose is kept (every --pnp method)")
+    reverify_sigmas: float = opt(3.0, "... its inlier threshold in noise std (at least 1 px)")
     max_median_px: float = opt(10.0, "a pose whose median reprojection error exceeds this is a failure (px); "
                                            "loose, so ablations without the LM step (be) are not judged by it")
 
@@ -208,6 +218,12 @@ class OdometryConfig:
             raise GeviError(f"{where}: fusion.acc_window_s", f"must be >= 0 (s), got {self.fusion.acc_window_s}")
         if not self.fusion.gravity_window_s >= 0:
             raise GeviError(f"{where}: fusion.gravity_window_s", f"must be >= 0 (s), got {self.fusion.gravity_window_s}")
+        if not self.pnp.step_tol >= 0:
+            raise GeviError(f"{where}: pnp.step_tol", f"must be >= 0, got {self.pnp.step_tol}")
+        if not self.pnp.max_refine_steps >= 1:
+            raise GeviError(f"{where}: pnp.max_refine_steps", f"must be >= 1, got {self.pnp.max_refine_steps}")
+        if not self.pnp.reverify_sigmas > 0:
+            raise GeviError(f"{where}: pnp.reverify_sigmas", f"must be > 0, got {self.pnp.reverify_sigmas}")
         return self
 
 

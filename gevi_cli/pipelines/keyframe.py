@@ -47,7 +47,9 @@ def make_keyframe(index: int, t_ns: int, T_w_k: np.ndarray, stereo: StereoObs, c
     depth = camera.depth_from_disparity(stereo.disparity)
     keep = (depth >= min_depth_m) & (depth <= max_depth_m) & np.isfinite(depth)
     if keep.sum() >= 3:
-        p, cov_unit = est.triangulate(z[keep], y[keep], camera.R_rl, camera.t_rl, 1.0)
+        # a match refined along the rectified row has y2 = z2 exactly: one measurement, not two
+        tied = z[keep, 1] == y[keep, 1]
+        p, cov_unit = est.triangulate(z[keep], y[keep], camera.R_rl, camera.t_rl, 1.0, tied_rows=tied)
     else:
         p, cov_unit = np.empty((0, 3)), np.empty((0, 3, 3))
     return Keyframe(index, t_ns, np.asarray(T_w_k, dtype=np.float64), ids[keep], z[keep], y[keep], p, cov_unit,

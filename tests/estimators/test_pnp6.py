@@ -130,3 +130,24 @@ def test_degenerate_inputs(s6):
     line = np.outer(np.linspace(1, 5, 20), [0.1, 0.2, 1.0])
     with pytest.raises(DegenerateInput):
         pnp6_ls(line, project(line @ s.R.T + s.t))
+
+
+def test_refine_step_length_is_quadratic_in_the_offset(s6):
+    """``return_step`` gives delta^T H delta: zero at the optimum of noise-free data and, to first
+    order, quadratic in the start's offset from it (GN on a zero-residual problem lands on it)."""
+    s = s6
+    p, cov = triangulate(s.z_o, s.y_o, s.R_rl, s.t_rl, s.sigma**2)
+    *_, m0 = pnp6_refine(s.R, s.t, p, cov, s.q_o, sigma2_q=s.sigma**2, return_step=True)
+    assert m0 < 1e-12
+    d = np.array([1.0, -2.0, 0.5, 3.0, -1.0, 2.0])
+    d /= np.linalg.norm(d)
+    m = []
+    for h in (1e-5, 2e-5):
+        R0, t0 = s.R @ exp_so3(h * d[:3]), s.t + h * d[3:]
+        R1, t1, mk = pnp6_refine(R0, t0, p, cov, s.q_o, sigma2_q=s.sigma**2, return_step=True)
+        m.append(mk)
+        assert rotation_error(R1, s.R) < 1e-3 * h * 180 / np.pi and np.linalg.norm(t1 - s.t) < 1e-3 * h
+    assert abs(m[1] / m[0] - 4.0) < 1e-3
+    # the plain call is unchanged
+    R2, t2 = pnp6_refine(R0, t0, p, cov, s.q_o, sigma2_q=s.sigma**2)
+    assert np.array_equal(R2, R1) and np.array_equal(t2, t1)
