@@ -156,7 +156,10 @@ def tracked_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig,
                 R2 = None
             if R2 is not None and np.all(np.isfinite(R2)) and np.all(np.isfinite(t2)):
                 med2 = reprojection_median_px(R2, t2, p, q, f)
-                if med2 < med:
+                # a minority of gross outliers drags the pose of all: without them the median error
+                # over all matches collapses; tracks merely noisier than sigma_hat do not do that
+                # (KITTI 04's exported colour tracks: 3 frames, 60 % kept, the median barely lower)
+                if med2 < 0.5 * med:
                     R, t, fallback, med = R2, t2, fb2, med2
     if med > cfg.max_median_px:
         raise TrackingFailure(f"median reprojection error {med:.2f} px after the pose step")
