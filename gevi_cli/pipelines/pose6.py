@@ -1,10 +1,11 @@
 """Keyframe -> current 6-DOF pose from triangulated keyframe points (spec 5) and its ablations.
 
-``be-w`` is the CurrentFeature estimator: Bias-Eli PnP (spec 5.2-5.3) + one weighted LM step
-(5.4).  ``be`` stops after the bias-eliminated linear step, ``ls`` uses the plain CPnP least
-squares (no bias elimination) + the same weighted step, so the two ablations isolate the two
-ingredients.  ``epnp``/``sqpnp`` are the textbook alternative: OpenCV's EPnP / SQPnP followed by
-OpenCV's (unweighted, iterated) LM refinement.
+``be-w`` is the CurrentFeature estimator: Bias-Eli PnP (spec 5.2-5.3) + the weighted LM step of
+5.4 (the paper's one, and more while a step is longer than ``pnp.step_tol``).  ``be`` stops after
+the bias-eliminated linear step, ``ls`` uses the plain CPnP least squares (no bias elimination) +
+the same weighted steps, so the two ablations isolate the two ingredients.  ``epnp``/``sqpnp`` are
+the textbook alternative: OpenCV's EPnP / SQPnP followed by OpenCV's (unweighted, iterated) LM
+refinement.
 """
 from __future__ import annotations
 
@@ -40,9 +41,7 @@ def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig
     except TrackingFailure as failure:  # e.g. the step from a degenerate linear start put points behind
         R = t = None
         err, first_failure = float("inf"), failure
-    # median |r| of 2-D Gaussian noise is 1.18 sigma: well above that the step has not converged
-    limit = max(cfg.fallback_sigmas * np.sqrt(sigma2) * f, cfg.fallback_min_px)
-    if err <= limit:
+    if err <= converged_limit_px(cfg, sigma2, f):
         return R, t, False
     try:
         R2, t2 = _weighted_steps(*opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False), p, cov, q, cfg, sigma2)
@@ -54,6 +53,14 @@ def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig
     if first_failure is not None:
         raise first_failure
     return R, t, False
+
+
+def converged_limit_px(cfg: PnPConfig, sigma2: float, f: float) -> float:
+    """Median reprojection error (px) above which a pose is not the converged fit of its matches:
+    ``cfg.fallback_sigmas`` noise std, at least ``cfg.fallback_min_px``.  The median |r| of 2-D
+    Gaussian noise is 1.18 sigma, so well above it the steps have not converged (SQPnP fallback) or a
+    minority of outliers drags the pose (re-verification)."""
+    return max(cfg.fallback_sigmas * np.sqrt(sigma2) * f, cfg.fallback_min_px)
 
 
 def _estimate(p, cov, q, cfg: PnPConfig, sigma2: float):
@@ -143,8 +150,7 @@ def tracked_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig,
     if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
         raise TrackingFailure("non-finite pose")
     med = reprojection_median_px(R, t, p, q, f)
-    limit = max(cfg.fallback_sigmas * np.sqrt(sigma2) * f, cfg.fallback_min_px)
-    if cfg.reverify and med > limit:
+    if cfg.reverify and med > converged_limit_px(cfg, sigma2, f):
         # Outliers that the epipolar verification cannot see (a group shifted along its epipolar
         # lines: measured on pool-hard_s2, 9 of 63 tracks 38 px off) drag every least-squares pose;
         # a 3D-2D RANSAC on the reprojection error finds them [PROPOSAL; docs/method.md 5.4].
