@@ -31,9 +31,17 @@ def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig
     redone from SQPnP (spec 5.5 [PROPOSAL]: "any robust PnP
     followed by LM") and the better of the two is kept.  Raises :class:`TrackingFailure`.
     """
+    R, t, fallback, _ = _pose6_and_median(p, cov, q, cfg, sigma2, f)
+    return R, t, fallback
+
+
+def _pose6_and_median(p, cov, q, cfg: PnPConfig, sigma2: float, f: float):
+    """:func:`estimate_pose6` and the median reprojection error (px) of its pose over all matches
+    when the fallback test had to compute it (None otherwise), so the tracking gates need not
+    compute it again."""
     if cfg.method not in ("be-w", "ls") or cfg.fallback_sigmas <= 0:
         R, t = _estimate(p, cov, q, cfg, sigma2)
-        return R, t, False
+        return R, t, False, None
     try:
         R, t = _estimate(p, cov, q, cfg, sigma2)
         err = reprojection_median_px(R, t, p, q, f)
@@ -42,17 +50,17 @@ def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig
         R = t = None
         err, first_failure = float("inf"), failure
     if err <= converged_limit_px(cfg, sigma2, f):
-        return R, t, False
+        return R, t, False, err
     try:
         R2, t2 = _weighted_steps(*opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False), p, cov, q, cfg, sigma2)
         err2 = reprojection_median_px(R2, t2, p, q, f)
     except (est.EstimatorError, cv2.error, TrackingFailure):
         err2 = float("inf")
     if err2 < err:
-        return R2, t2, True
+        return R2, t2, True, err2
     if first_failure is not None:
         raise first_failure
-    return R, t, False
+    return R, t, False, err
 
 
 def converged_limit_px(cfg: PnPConfig, sigma2: float, f: float) -> float:
@@ -99,10 +107,15 @@ def _weighted_steps(R, t, p, cov, q, cfg: PnPConfig, sigma2: float):
     return R, t
 
 
+def _cv_points(p: np.ndarray, q: np.ndarray):
+    """Points (n, 3) and normalized image points (n, 2) in the layout OpenCV's PnP functions take."""
+    return (np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 1, 3),
+            np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 1, 2))
+
+
 def opencv_pnp(p: np.ndarray, q: np.ndarray, flag: int, refine: bool):
     """OpenCV PnP on normalized coordinates (K = I), optionally + OpenCV's LM -> (R, t)."""
-    obj = np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 1, 3)
-    img = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 1, 2)
+    obj, img = _cv_points(p, q)
     ok, rvec, tvec = cv2.solvePnP(obj, img, np.eye(3), None, flags=flag)
     if not ok:
         raise TrackingFailure("OpenCV PnP failed")
@@ -114,8 +127,7 @@ def opencv_pnp(p: np.ndarray, q: np.ndarray, flag: int, refine: bool):
 def _pnp_ransac_inliers(p: np.ndarray, q: np.ndarray, threshold: float) -> np.ndarray | None:
     """Inlier mask of OpenCV's P3P RANSAC on the reprojection error (normalized ``threshold``), or
     None when it finds no pose."""
-    obj = np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 1, 3)
-    img = np.ascontiguousarray(q, dtype=np.float64).reshape(-1, 1, 2)
+    obj, img = _cv_points(p, q)
     try:
         ok, _, _, idx = cv2.solvePnPRansac(obj, img, np.eye(3), None, reprojectionError=float(threshold),
                                            confidence=0.999, iterationsCount=200, flags=cv2.SOLVEPNP_AP3P)
@@ -139,6 +151,10 @@ def reprojection_median_px(R: np.ndarray, t: np.ndarray, p: np.ndarray, q: np.nd
     return float(np.median(np.linalg.norm(r, axis=1))) * f
 
 
+def _finite(R: np.ndarray, t: np.ndarray) -> bool:
+    return bool(np.all(np.isfinite(R)) and np.all(np.isfinite(t)))
+
+
 def tracked_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig, sigma2: float, f: float):
     """The 6-DOF tracking step of the pipelines: (R_ck, t_ck, fell_back) or :class:`TrackingFailure`.
 
@@ -146,10 +162,11 @@ def tracked_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig,
     ``cfg.max_median_px``.  CurrentFeature Odometry uses it for every frame, GeVI before its
     initialisation and where the IMU has a gap.
     """
-    R, t, fallback = estimate_pose6(p, cov, q, cfg, sigma2, f)
-    if not (np.all(np.isfinite(R)) and np.all(np.isfinite(t))):
+    R, t, fallback, med = _pose6_and_median(p, cov, q, cfg, sigma2, f)
+    if not _finite(R, t):
         raise TrackingFailure("non-finite pose")
-    med = reprojection_median_px(R, t, p, q, f)
+    if med is None:
+        med = reprojection_median_px(R, t, p, q, f)
     if cfg.reverify and med > converged_limit_px(cfg, sigma2, f):
         # Outliers that the epipolar verification cannot see (a group shifted along its epipolar
         # lines: measured on pool-hard_s2, 9 of 63 tracks 38 px off) drag every least-squares pose;
@@ -160,7 +177,7 @@ def tracked_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig,
                 R2, t2, fb2 = estimate_pose6(p[keep], cov[keep], q[keep], cfg, sigma2, f)
             except TrackingFailure:
                 R2 = None
-            if R2 is not None and np.all(np.isfinite(R2)) and np.all(np.isfinite(t2)):
+            if R2 is not None and _finite(R2, t2):
                 med2 = reprojection_median_px(R2, t2, p, q, f)
                 # a minority of gross outliers drags the pose of all: without them the median error
                 # over all matches collapses; tracks merely noisier than sigma_hat do not do that
