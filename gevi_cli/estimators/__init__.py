@@ -33,6 +33,7 @@ from .pnp6 import (
     pnp6_l1,
     pnp6_ls,
     pnp6_refine,
+    pnp6_whitened_sq,
     pnp_l1_filter,
     recover_pose,
 )
@@ -76,6 +77,7 @@ __all__ = [
     "pnp6_ls",
     "pnp6_be",
     "pnp6_refine",
+    "pnp6_whitened_sq",
     "pnp6_l1",
     "pnp_l1_filter",
     "depth_weights",

@@ -161,19 +161,9 @@ def pnp6_refine(R, t, p, cov, q, sigma2_q=0.0, mu_rel=1e-6, return_step=False):
     need(n, 3)
     cov = as_covs(cov, n, 3, "cov")
     r, X = reprojection_residuals(R, t, p, q)
-    # Explicit 2x2 / 2x3 algebra instead of stacked matmuls: this runs once per frame in the
-    # pipelines, and numpy's batched matmul of tiny matrices costs more than the arithmetic.
     dpi = project_jacobian(X)  # (n, 2, 3)
     Jh = dpi @ R  # (n, 2, 3): d pi / d p
-    cov9 = cov.reshape(n, 9)
-    a, b = Jh[:, 0], Jh[:, 1]
-    S00 = ((a[:, :, None] * a[:, None, :]).reshape(n, 9) * cov9).sum(1) + sigma2_q
-    S01 = ((a[:, :, None] * b[:, None, :]).reshape(n, 9) * cov9).sum(1)
-    S11 = ((b[:, :, None] * b[:, None, :]).reshape(n, 9) * cov9).sum(1) + sigma2_q
-    det = S00 * S11 - S01 * S01
-    if np.any(det <= 0):
-        raise DegenerateInput("pnp6_refine: singular projected covariance (zero point covariance?)")
-    W00, W01, W11 = S11 / det, -S01 / det, S00 / det
+    W00, W01, W11 = _residual_information(Jh, cov, sigma2_q, "pnp6_refine")
     # d pi / d delta for R+ = R Exp(dphi), t+ = t + dt: [-Jh [p]_x | dpi]; a^T [p]_x = (a x p)^T.
     J = np.empty((n, 2, 6))
     px, py, pz = p[:, None, 0], p[:, None, 1], p[:, None, 2]
@@ -191,6 +181,52 @@ def pnp6_refine(R, t, p, cov, q, sigma2_q=0.0, mu_rel=1e-6, return_step=False):
     delta = solve_checked(Hm + mu_rel * np.max(np.diag(Hm)) * np.eye(6), g, "pnp6_refine")
     out = R @ exp_so3(delta[:3]), t + delta[3:]
     return (*out, float(delta @ Hm @ delta)) if return_step else out
+
+
+def _residual_information(Jh, cov, sigma2_q, who):
+    """Entries (W00, W01, W11) of Sigma_bar_i^-1, Sigma_bar_i = J_h Sigma_i J_h^T + sigma2_q I (spec 5.4).
+
+    Explicit 2x2 / 2x3 algebra instead of stacked matmuls: this runs once per frame in the
+    pipelines, and numpy's batched matmul of tiny matrices costs more than the arithmetic.
+    """
+    n = len(Jh)
+    cov9 = cov.reshape(n, 9)
+    a, b = Jh[:, 0], Jh[:, 1]
+    S00 = ((a[:, :, None] * a[:, None, :]).reshape(n, 9) * cov9).sum(1) + sigma2_q
+    S01 = ((a[:, :, None] * b[:, None, :]).reshape(n, 9) * cov9).sum(1)
+    S11 = ((b[:, :, None] * b[:, None, :]).reshape(n, 9) * cov9).sum(1) + sigma2_q
+    det = S00 * S11 - S01 * S01
+    if np.any(det <= 0):
+        raise DegenerateInput(f"{who}: singular projected covariance (zero point covariance?)")
+    return S11 / det, -S01 / det, S00 / det
+
+
+def pnp6_whitened_sq(R, t, p, cov, q, sigma2_q=0.0):
+    """Squared Mahalanobis norms ``r_i^T Sigma_bar_i^-1 r_i`` (n,) of the reprojection residuals at
+    ``(R, t)``, with the covariance the weighted step uses (:func:`pnp6_refine`): the point's
+    covariance projected into the current image, plus ``sigma2_q I`` for the current frame.
+
+    Under that noise model each is chi-square with 2 degrees of freedom (mean 2, 99.9 % below 13.8),
+    so a larger value flags a match the model cannot explain (a wrong stereo depth).  Points behind
+    the camera get ``inf``.
+    """
+    R = as_matrix(R, (3, 3), "R")
+    t = as_matrix(t, (3,), "t")
+    p = as_points(p, 3, "p")
+    q = as_points(q, 2, "q")
+    n = same_length(p, q)
+    cov = as_covs(cov, n, 3, "cov")
+    X = p @ R.T + t
+    front = X[:, 2] > 0
+    out = np.full(n, np.inf)
+    if not front.any():
+        return out
+    Xf = X[front]
+    Jh = project_jacobian(Xf) @ R
+    W00, W01, W11 = _residual_information(Jh, cov[front], sigma2_q, "pnp6_whitened_sq")
+    r = q[front] - project(Xf)
+    out[front] = W00 * r[:, 0] ** 2 + 2.0 * W01 * r[:, 0] * r[:, 1] + W11 * r[:, 1] ** 2
+    return out
 
 
 def pnp6_l1(p, q):

@@ -80,6 +80,10 @@ class PnPConfig:
                                "drop the outliers of a 3D-2D RANSAC (OpenCV AP3P) and redo the pose; the better "
                                "pose is kept (every --pnp method)")
     reverify_sigmas: float = opt(3.0, "... its inlier threshold in noise std (at least 1 px)")
+    chi2_gate: float = opt(13.8, "[PROPOSAL] be-w/ls: after the pose, matches whose reprojection residual exceeds "
+                                 "this squared Mahalanobis norm under the weights' own covariance (chi-square, "
+                                 "2 dof: 13.8 = 99.9 %) are dropped and the weighted steps redone on the rest, "
+                                 "twice at most (wrong stereo depths; docs/method.md 5.4); 0: off")
     max_median_px: float = opt(10.0, "a pose whose median reprojection error exceeds this is a failure (px); "
                                            "loose, so ablations without the LM step (be) are not judged by it")
 

@@ -12,6 +12,7 @@ from gevi_cli.estimators import (
     pnp6_l1,
     pnp6_ls,
     pnp6_refine,
+    pnp6_whitened_sq,
     pnp_l1_filter,
     sigma2_onesided,
     triangulate,
@@ -151,3 +152,28 @@ def test_refine_step_length_is_quadratic_in_the_offset(s6):
     # the plain call is unchanged
     R2, t2 = pnp6_refine(R0, t0, p, cov, s.q_o, sigma2_q=s.sigma**2)
     assert np.array_equal(R2, R1) and np.array_equal(t2, t1)
+
+
+def test_whitened_residuals_are_chi_square_2(rng):
+    """Gaussian-3D points and a noisy current frame (the weights' own model): at the true pose the
+    squared Mahalanobis norms average 2 (chi-square, 2 dof) to within their Monte Carlo error, 99.9 %
+    of them lie below 13.8, and each equals r^T Sigma_bar^-1 r computed directly."""
+    s = sim.scene6(rng, 4000)
+    P = s.P
+    cov = np.tile(np.diag([4e-6, 4e-6, 1e-4]), (len(P), 1, 1))
+    p = sim.gaussian3d_points(rng, P, cov)
+    s2 = (0.5 / sim.F_PX) ** 2
+    q = project(P @ s.R.T + s.t) + np.sqrt(s2) * rng.standard_normal((len(P), 2))
+    m2 = pnp6_whitened_sq(s.R, s.t, p, cov, q, s2)
+    # (first order in the point noise: the projection's curvature adds O(sigma_p^2 / Z^2), negligible here)
+    assert abs(m2.mean() - 2.0) < 4 * 2.0 / np.sqrt(len(m2))
+    assert np.mean(m2 > 13.8) < 0.004
+    X = p @ s.R.T + s.t
+    i = 7
+    J = np.array([[1 / X[i, 2], 0, -X[i, 0] / X[i, 2] ** 2], [0, 1 / X[i, 2], -X[i, 1] / X[i, 2] ** 2]]) @ s.R
+    S = J @ cov[i] @ J.T + s2 * np.eye(2)
+    r = q[i] - X[i, :2] / X[i, 2]
+    assert m2[i] == pytest.approx(r @ np.linalg.solve(S, r), rel=1e-9)
+    behind = p.copy()
+    behind[0] = -(s.R.T @ (s.t + np.array([0.0, 0.0, 1.0])))  # 1 m behind the current camera
+    assert np.isinf(pnp6_whitened_sq(s.R, s.t, behind, cov, q, s2)[0])

@@ -92,10 +92,60 @@ def test_reverify_removes_a_shifted_group_of_tracks(floor, method):
     q_true = q.copy()
     q[:9] += np.array([38.0, 5.0]) / F_PX
     cfg = replace(PnPConfig(), method=method)
-    Rb, tb, _ = tracked_pose6(p, cov, q, replace(cfg, reverify=False), s2, F_PX)
+    # (the chi-square gate would also catch them for be-w: off here, this is the re-verification's test)
+    Rb, tb, _ = tracked_pose6(p, cov, q, replace(cfg, reverify=False, chi2_gate=0.0), s2, F_PX)
     R, t, _ = tracked_pose6(p, cov, q, cfg, s2, F_PX)
     # distances from the optimum of the clean tracks, in squared standard deviations of the pose
     assert _distance_to_optimum(Rb, tb, p, cov, q_true, s2) > 1e3  # dragged by the group
     # the 54 clean tracks alone differ from all 63 by their own noise only: within 3 sigma
     d = _distance_to_optimum(R, t, p, cov, q_true, s2)
     assert d < 9.0, d
+
+
+def _wrong_depths(floor, frac, rng):
+    """The floor with ``frac`` of its stereo matches gross (10-40 px of disparity off, as pool-hard's
+    turbid stereo, scripts/track_bias.py): their points are wrong, their tracks right."""
+    p, cov, q, s2 = floor
+    n = len(p)
+    bad = rng.permutation(n)[: int(frac * n)]
+    z = project(p)
+    y = project(p + sim.T_RL)
+    y[:, 1] = z[:, 1]
+    y[bad, 0] += rng.choice([-1.0, 1.0], len(bad)) * rng.uniform(10, 40, len(bad)) / F_PX
+    y[bad, 0] = np.minimum(y[bad, 0], z[bad, 0] - 2.0 / F_PX)  # still a positive disparity
+    p2, cov2 = est.triangulate(z, y, sim.R_RL, sim.T_RL, s2, tied_rows=np.ones(n, bool))
+    return p2, cov2, bad
+
+
+def test_chi2_gate_removes_wrong_stereo_depths(floor):
+    """15 % wrong depths drag the weighted pose hundreds of variances off the optimum of the clean
+    matches; the chi-square gate on the weights' own covariance drops most of them (the far ones
+    whose large covariance explains their error stay, with little weight) and takes away more than
+    90 % of the drag."""
+    from gevi_cli.pipelines.pose6 import tracked_pose6
+
+    _, _, q, s2 = floor
+    p, cov, bad = _wrong_depths(floor, 0.15, np.random.default_rng(2))
+    good = np.setdiff1d(np.arange(len(p)), bad)
+    cfg = PnPConfig()
+    R0, t0, _ = tracked_pose6(p, cov, q, replace(cfg, chi2_gate=0.0), s2, F_PX)
+    R, t, _ = tracked_pose6(p, cov, q, cfg, s2, F_PX)
+    # distances from the optimum of the clean matches, in squared standard deviations of the pose
+    d0 = _distance_to_optimum(R0, t0, p[good], cov[good], q[good], s2)
+    d = _distance_to_optimum(R, t, p[good], cov[good], q[good], s2)
+    assert d0 > 100.0 and d < 0.1 * d0, (d0, d)
+    assert np.sum(est.pnp6_whitened_sq(R, t, p, cov, q, s2)[bad] > cfg.chi2_gate) >= 0.75 * len(bad)
+
+
+def test_chi2_gate_leaves_clean_matches_alone(floor):
+    """Without gross errors the gate drops about 0.1 % of the matches (its chi-square tail) and
+    moves the pose by a small fraction of its standard deviation."""
+    from gevi_cli.pipelines.pose6 import tracked_pose6
+
+    p, cov, q, s2 = floor
+    cfg = PnPConfig()
+    R0, t0, _ = tracked_pose6(p, cov, q, replace(cfg, chi2_gate=0.0), s2, F_PX)
+    m2 = est.pnp6_whitened_sq(R0, t0, p, cov, q, s2)
+    assert np.mean(m2 > cfg.chi2_gate) <= 0.01
+    R, t, _ = tracked_pose6(p, cov, q, cfg, s2, F_PX)
+    assert _distance_to_optimum(R, t, p, cov, q, s2) < 0.25
