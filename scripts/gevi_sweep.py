@@ -57,7 +57,11 @@ def run_one(seq: Path, variant: str, out: Path) -> dict:
            "tracked": f"{st['frames_tracked']}/{st['frames_done']}", "inertial": len(st.get("inertial_frames", [])),
            "ATE_mm": 1e3 * ev.get("ate_m", np.nan), "RPE_mm": 1e3 * ev.get("rpe_m", np.nan),
            "fps": st["frames_done"] / st["elapsed_s"], "verify_ms": timing["verify_ms"].mean()}
-    row["tilt_deg"], row["tilt_first10_deg"], row["tilt_last10_deg"] = tilt_windows(run, seq)
+    if st.get("method", variant.split()[0]) == "cfo":
+        # CFO's world is its first camera, not gravity-aligned: a tilt against the truth means nothing
+        row["tilt_deg"] = row["tilt_first10_deg"] = row["tilt_last10_deg"] = np.nan
+    else:
+        row["tilt_deg"], row["tilt_first10_deg"], row["tilt_last10_deg"] = tilt_windows(run, seq)
     return row
 
 

@@ -32,6 +32,7 @@ test; a 30 s pool render takes about 40 s.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 import tempfile
 from dataclasses import replace
@@ -57,7 +58,7 @@ def record(render: Path) -> list[dict]:
 
     cfo_mod.CurrentFeatureOdometry.estimate_T_ck = spy
     try:
-        with tempfile.TemporaryDirectory() as tmp:
+        with tempfile.TemporaryDirectory() as tmp, contextlib.redirect_stdout(sys.stderr):
             try:
                 gevi_main(["run", str(render), "--method", "cfo", "--no-ba", "-q", "-o", tmp])
             except SystemExit as ex:
