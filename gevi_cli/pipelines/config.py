@@ -83,7 +83,7 @@ class PnPConfig:
     chi2_gate: float = opt(13.8, "[PROPOSAL] be-w/ls: after the pose, matches whose reprojection residual exceeds "
                                  "this squared Mahalanobis norm under the weights' own covariance (chi-square, "
                                  "2 dof: 13.8 = 99.9 %) are dropped and the weighted steps redone on the rest, "
-                                 "twice at most (wrong stereo depths; docs/method.md 5.4); 0: off")
+                                 "until the set stops changing (wrong stereo depths; docs/method.md 5.4); 0: off")
     max_median_px: float = opt(10.0, "a pose whose median reprojection error exceeds this is a failure (px); "
                                            "loose, so ablations without the LM step (be) are not judged by it")
 
