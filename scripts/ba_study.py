@@ -16,7 +16,8 @@ rectified cam0) with the render's truth for:
 * ``BA max_gap 1``: frame-frame pairs between neighbours only (``ba.max_gap`` = 1);
 * ``BA + PnP terms`` [a study variant, not in gevi]: the BA's epipolar residuals (inliers of the
   start within 3 sigma) plus, for every frame of the window, the whitened reprojection residuals of
-  KF1's stereo points (covariance of spec 4, tied rows, plus the frame's noise, as ``be-w``), solved
+  KF1's stereo points (covariance of spec 4, tied rows, plus the frame's noise, as ``be-w``; those
+  whose whitened residual at the start is within 3), solved
   with ``scipy.optimize.least_squares``.
 
 Only windows of at most ``--max-window`` frames (KF2 included) are compared, for every variant alike
@@ -85,6 +86,7 @@ def ba_with_pnp_terms(w) -> tuple[np.ndarray, np.ndarray]:
 
     from gevi_cli import estimators as est
     from gevi_cli.estimators.epipolar_ba import BAProblem, euler_zyx
+    from gevi_cli.estimators.lie import project_jacobian
 
     sig = float(w.sigma)
     prob = BAProblem(w)
@@ -101,10 +103,7 @@ def ba_with_pnp_terms(w) -> tuple[np.ndarray, np.ndarray]:
     for k, o in enumerate(list(w.frames) + [w.kf2_left]):
         _, ia, ib = np.intersect1d(ids, o.ids, return_indices=True)
         X = (p[ia] - P0[k, 3:]) @ R0[k]
-        Jp = np.zeros((len(X), 2, 3))
-        Jp[:, 0, 0] = Jp[:, 1, 1] = 1 / X[:, 2]
-        Jp[:, :, 2] = -X[:, :2] / X[:, 2:3] ** 2
-        Jh = Jp @ R0[k].T
+        Jh = project_jacobian(X) @ R0[k].T
         L = np.linalg.inv(np.linalg.cholesky(Jh @ cov[ia] @ np.swapaxes(Jh, 1, 2) + sig**2 * np.eye(2)))
         r0 = np.einsum("nij,nj->ni", L, o.xy[ib] - X[:, :2] / X[:, 2:3])
         terms.append((k, p[ia], o.xy[ib], L, np.linalg.norm(r0, axis=1) < 3.0))

@@ -104,9 +104,9 @@ def variants():
     }
 
 
-def evaluate(recs: list[dict]) -> dict[str, tuple[float, float, float, float, int]]:
-    """Per variant: translation RMS and median (mm), rotation RMS (deg), mean weighted steps, frames
-    the variant could not track (not in the statistics)."""
+def evaluate(recs: list[dict]) -> dict[str, tuple]:
+    """Per variant: translation RMS and median (mm), rotation RMS (deg), mean rotation-error vector
+    (deg, (3,)), mean weighted steps, frames the variant could not track (not in the statistics)."""
     from scipy.spatial.transform import Rotation
 
     from gevi_cli import estimators as est
