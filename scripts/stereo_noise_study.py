@@ -93,6 +93,19 @@ def main(argv=None) -> int:
     ap.add_argument("sequences", nargs="+", type=Path, help="sequences with ground truth")
     ap.add_argument("--frames", type=int, default=None, help="at most this many frames per sequence")
     args = ap.parse_args(argv)
+    from gevi_cli.datasets import open_sequence
+    from gevi_cli.errors import GeviError
+
+    for seq in args.sequences:
+        try:
+            has_gt = open_sequence(seq).groundtruth is not None
+        except GeviError as err:
+            print(f"stereo_noise_study.py: error: {err}", file=sys.stderr)
+            return 2
+        if not has_gt:
+            print(f"stereo_noise_study.py: error: {seq}: no ground truth in the sequence (the study needs the "
+                  "true motion between keyframes)", file=sys.stderr)
+            return 2
     print("| sequence | keyframes | pairs | sigma px (last) | median m2 | mean m2 | 99 % trimmed mean | "
           "variance ratio | median m2 by depth (m) |")
     print("|---|---|---|---|---|---|---|---|---|")
