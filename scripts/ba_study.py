@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The epipolar local BA of CurrentFeature Odometry against a render's truth, window by window.
 
-    python scripts/ba_study.py RENDER [RENDER ...] [--max-window 12]
+    python scripts/ba_study.py RENDER [RENDER ...] [--max-window 12] [--ideal-tracks [--noise-seed N]]
 
 For every RENDER (a folder written by `gevi simulate`) it runs `gevi run RENDER --method cfo` in this
 process (the render's config, BA on) and records every BA window the pipeline solves (spec 10: the
@@ -19,6 +19,18 @@ rectified cam0) with the render's truth for:
   KF1's stereo points (covariance of spec 4, tied rows, plus the frame's noise, as ``be-w``; those
   whose whitened residual at the start is within 3), solved
   with ``scipy.optimize.least_squares``.
+
+With ``--ideal-tracks`` the same windows are also solved (the pipeline's options, from the same
+tracked start) on observations built from the render's truth: every feature's KF1-left ray is cast
+to the scene's planes with the true pose and projected with the true poses into every image of the
+window in which the front end observed it (same features, same images), then
+
+* ``BA, ideal tracks``: plus Gaussian noise of the window's own sigma in every image;
+* ``BA, real tracks, KF2-left ideal``: the real observations, except KF2-left's (ideal + noise);
+* ``BA, real tracks, frames ideal``: the real observations, except F_1..F_K's (ideal + noise).
+
+These separate the estimator (is it biased under Gaussian noise in this geometry?) from the front
+end's errors, and say which images' errors the BA turns into its drift.
 
 Only windows of at most ``--max-window`` frames (KF2 included) are compared, for every variant alike
 (the study solver is slow on long windows); the count is printed.
@@ -52,7 +64,8 @@ def record(render: Path) -> list[dict]:
     orig_ba, orig_local = est.epipolar_local_ba, od.KeyframeOdometry._local_ba
 
     def spy_local(self, new):
-        ctx.update(t1=self.kf.t_ns, t2=new.t_ns, T_B_C0=np.asarray(self.camera.T_B_C0))
+        ctx.update(t1=self.kf.t_ns, t2=new.t_ns, T_B_C0=np.asarray(self.camera.T_B_C0),
+                   t_frames=[f.t_ns for f in self.window], R0=self.frontend.rectifier.R0.copy())
         return orig_local(self, new)
 
     def spy_ba(window, options=None):
@@ -121,15 +134,85 @@ def ba_with_pnp_terms(w) -> tuple[np.ndarray, np.ndarray]:
     return euler_zyx(x[-1:, :3])[0], x[-1, 3:]
 
 
+def ideal_windows(render: Path, recs: list[dict], noise_seed: int = 0) -> None:
+    """Add ``ideal``, ``ideal_kf2`` and ``ideal_frames`` windows (see the module docstring) to every
+    record whose images can all be cast (records lacking a truth stamp are left without)."""
+    import yaml
+
+    from gevi_cli import estimators as est
+    from gevi_cli.simulate.generate import SimulationConfig, build_sequence
+    from track_bias import cast_to_scene
+
+    meta = yaml.safe_load((render / "simulation.yaml").read_text())
+    o = meta["options"]
+    sim = build_sequence(SimulationConfig(meta["preset"], seed=int(meta["seed"]), duration_s=o["duration_s"],
+                                          rate_hz=o["rate_hz"], resolution=tuple(o["resolution"]),
+                                          baseline_m=o["baseline_m"], distortion=o["distortion"],
+                                          image_noise=o["image_noise"], supersample=o["supersample"]))
+    index = {int(t): i for i, t in enumerate(sim.frame_t_ns)}
+    rng = np.random.default_rng(noise_seed)
+
+    def T_W_raw(k: int) -> np.ndarray:  # raw left camera in W
+        return sim.body_state(sim.frame_t_ns[k:k + 1]).T_WB[0] @ sim.rig.T_B_C0
+
+    for r in recs:
+        w, R0 = r["window"], r["R0"]
+        if r["t1"] not in index or not all(t in index for t in r["t_frames"]):
+            continue
+
+        def T_W_rect(k: int) -> np.ndarray:  # rectified left camera in W: X_C0 = R0^T X_C0r
+            T = T_W_raw(k).copy()
+            T[:3, :3] = T[:3, :3] @ R0.T
+            return T
+
+        k1 = index[r["t1"]]
+        T1 = T_W_rect(k1)
+        T_1k = [np.linalg.inv(T1) @ T_W_rect(index[t]) for t in r["t_frames"]]  # T_K1Fk, last = KF2
+        ray = np.column_stack([w.kf1_left.xy, np.ones(len(w.kf1_left.ids))]) @ R0  # raw-camera rays
+        P_W = cast_to_scene(sim.scene, T_W_raw(k1), ray / np.linalg.norm(ray, axis=1)[:, None])
+        P_1 = (P_W - T1[:3, 3]) @ T1[:3, :3]
+        ok = np.all(np.isfinite(P_1), axis=1) & (P_1[:, 2] > 0)
+        ids1, P_1 = w.kf1_left.ids[ok], P_1[ok]
+
+        def ideal(o, T, right):
+            _, ia, ib = np.intersect1d(ids1, o.ids, assume_unique=True, return_indices=True)
+            X = (P_1[ia] - T[:3, 3]) @ T[:3, :3]
+            if right:
+                X = X @ np.asarray(w.R_rl).T + np.asarray(w.t_rl).reshape(3)
+            xy = X[:, :2] / X[:, 2:3] + rng.normal(0.0, w.sigma, (len(ia), 2))
+            return est.ImageObs(o.ids[ib], xy)
+
+        def real(o):  # the same features (those with a cast ray) as observed
+            keep = np.isin(o.ids, ids1)
+            return est.ImageObs(o.ids[keep], o.xy[keep])
+
+        I4 = np.eye(4)
+        kf1 = (ideal(w.kf1_left, I4, False), ideal(w.kf1_right, I4, True))
+        kf1_real = (real(w.kf1_left), real(w.kf1_right))
+        frames = [ideal(f, T_1k[k], False) for k, f in enumerate(w.frames)]
+        kf2 = (ideal(w.kf2_left, T_1k[-1], False), ideal(w.kf2_right, T_1k[-1], True))
+        kf2_real = (real(w.kf2_left), real(w.kf2_right))
+        frames_real = [real(f) for f in w.frames]
+
+        def window(a, f, b):
+            return est.BAWindow(a[0], a[1], f, b[0], b[1], w.R_init, w.t_init, w.R_rl, w.t_rl, sigma=w.sigma)
+
+        r["ideal"] = window(kf1, frames, kf2)
+        r["ideal_kf2"] = window(kf1_real, frames_real, (kf2[0], kf2_real[1]))
+        r["ideal_frames"] = window(kf1_real, frames, kf2_real)
+
+
 def evaluate(recs: list[dict], max_window: int) -> dict[str, tuple]:
     """Per variant: windows, rotation RMS (deg), summed rotation-error vector (deg), translation RMS (mm)."""
     from scipy.spatial.transform import Rotation
 
     from gevi_cli import estimators as est
 
-    def ba(opt_change):
+    def ba(opt_change, key="window"):
         def fn(r):
-            res = est.epipolar_local_ba(r["window"], replace(r["options"], **opt_change))
+            if key not in r:
+                return None
+            res = est.epipolar_local_ba(r[key], replace(r["options"], **opt_change))
             return res.R[-1], res.t[-1]
         return fn
 
@@ -142,6 +225,9 @@ def evaluate(recs: list[dict], max_window: int) -> dict[str, tuple]:
         "BA max_gap 1": ba({"max_gap": 1}),
         "BA + PnP terms": lambda r: ba_with_pnp_terms(r["window"]),
     }
+    if any("ideal" in r for r in recs):
+        variants.update({"BA, ideal tracks": ba({}, "ideal"), "BA, real tracks, KF2-left ideal": ba({}, "ideal_kf2"),
+                         "BA, real tracks, frames ideal": ba({}, "ideal_frames")})
     recs = [r for r in recs if len(r["window"].frames) < max_window]
     out = {}
     for name, fn in variants.items():
@@ -169,6 +255,9 @@ def main(argv=None) -> int:
     ap.add_argument("renders", nargs="+", type=Path, help="folders written by gevi simulate")
     ap.add_argument("--max-window", type=int, default=12,
                     help="compare the windows of at most this many frames (default 12)")
+    ap.add_argument("--ideal-tracks", action="store_true",
+                    help="also solve every window on observations built from the render's truth (see above)")
+    ap.add_argument("--noise-seed", type=int, default=0, help="seed of the Gaussian noise of --ideal-tracks")
     args = ap.parse_args(argv)
     for r in args.renders:
         if not (r / "simulation.yaml").is_file():
@@ -177,7 +266,10 @@ def main(argv=None) -> int:
     print("| render | variant | windows | R RMS deg | summed R error deg (x, y, z) | t RMS mm |")
     print("|---|---|---|---|---|---|")
     for r in args.renders:
-        for name, (n, rot, s, tr) in evaluate(record(r), args.max_window).items():
+        recs = record(r)
+        if args.ideal_tracks:
+            ideal_windows(r, recs, args.noise_seed)
+        for name, (n, rot, s, tr) in evaluate(recs, args.max_window).items():
             print(f"| {r.name} | {name} | {n} | {rot:.4f} | {s[0]:+.3f}, {s[1]:+.3f}, {s[2]:+.3f} | {tr:.3f} |",
                   flush=True)
     return 0
