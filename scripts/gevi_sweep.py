@@ -27,6 +27,7 @@ VARIANTS = {
     "gevi --no-adaptive": ["--method", "gevi", "--no-adaptive"],
     "gevi --no-fusion": ["--method", "gevi", "--no-fusion"],
     "gevi --ransac 5pt": ["--method", "gevi", "--ransac", "5pt"],
+    "gevi --no-ba": ["--method", "gevi", "--no-ba"],
     "cfo": ["--method", "cfo"],
 }
 
