@@ -39,8 +39,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.optimize import least_squares
 
 from .errors import DegenerateInput, NonFiniteInput, ShapeError, TooFewPoints
 from .lie import homogeneous, rot_x, rot_y, rot_z, skew
@@ -264,6 +262,8 @@ class BAProblem:
             self._cols = cols[valid]
 
     def jac_sparsity(self):
+        import scipy.sparse as sp  # only the scipy solver path and tests need it (import cost: see _scipy_solve)
+
         self._sparsity()
         return sp.csr_matrix((np.ones(self._rows.size), (self._rows, self._cols)), shape=(self.m, self.n_params))
 
@@ -340,6 +340,8 @@ class BAProblem:
             return d, vals
         self._sparsity()
         if sparse:
+            import scipy.sparse as sp
+
             J = sp.csr_matrix((vals[self._valid], (self._rows, self._cols)), shape=(self.m, self.n_params))
         else:
             J = np.zeros((self.m, self.n_params))
@@ -455,7 +457,11 @@ def _lm_irls(prob, x0, kernel, delta, max_iter, tol):
 
 
 def _scipy_solve(prob, x0, opt, loss, delta):
-    """scipy.optimize.least_squares with the analytic (dense or CSR) Jacobian."""
+    """scipy.optimize.least_squares with the analytic (dense or CSR) Jacobian.
+
+    Imported here, not at module level: the default solver does not need it, and importing
+    scipy.optimize costs ~0.09 s of every `gevi run` process (bench_pipeline.py's process budget)."""
+    from scipy.optimize import least_squares
     cache = {}
 
     def fun(x):
