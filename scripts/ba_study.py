@@ -140,6 +140,7 @@ def ideal_windows(render: Path, recs: list[dict], noise_seed: int = 0) -> None:
     import yaml
 
     from gevi_cli import estimators as est
+    from gevi_cli.datasets import open_sequence
     from gevi_cli.simulate.generate import SimulationConfig, build_sequence
     from track_bias import cast_to_scene
 
@@ -149,7 +150,8 @@ def ideal_windows(render: Path, recs: list[dict], noise_seed: int = 0) -> None:
                                           rate_hz=o["rate_hz"], resolution=tuple(o["resolution"]),
                                           baseline_m=o["baseline_m"], distortion=o["distortion"],
                                           image_noise=o["image_noise"], supersample=o["supersample"]))
-    index = {int(t): i for i, t in enumerate(sim.frame_t_ns)}
+    # frame k of the written sequence is frame k of the render (KITTI-format renders restart the clock)
+    index = {int(t): i for i, t in enumerate(open_sequence(render).stamps_ns)}
     rng = np.random.default_rng(noise_seed)
 
     def T_W_raw(k: int) -> np.ndarray:  # raw left camera in W
