@@ -14,7 +14,8 @@ frames (rectified pixels).
 Printed, as mean +- standard error:
 
 * the stereo disparity error (px), and the relative depth error it makes (-error / disparity);
-* per frame after the keyframe, the temporal track error along the true flow (px), and that error as
+* per frame after the keyframe, the RMS of the tracks' 2-D error (px; tracks within 2 px of the truth
+  and more than 2 px of flow), the temporal track error along the true flow (px), and that error as
   a fraction of the flow length: a scale-like shortening or lengthening of the tracked motion, which
   a stereo odometry turns into a scale error of its translation.
 
@@ -102,6 +103,7 @@ def main(argv=None) -> int:
 
     disp_err, disp_true = [], []
     along = {m: [] for m in range(1, a.span + 1)}
+    err2 = {m: [] for m in range(1, a.span + 1)}
     frac = {m: [] for m in range(1, a.span + 1)}
     on_edge = {m: [] for m in range(1, a.span + 1)}
     for k0 in np.linspace(5, sim.frame_t_ns.size - a.span - 5, a.keyframes).astype(int):
@@ -145,6 +147,7 @@ def main(argv=None) -> int:
             good = np.isfinite(e).all(1) & (np.linalg.norm(e, axis=1) < 2.0) & (fl > 2.0)
             a_m = np.sum(e[good] * flow[good], axis=1) / fl[good]
             along[m].append(a_m)
+            err2[m].append(np.sum(e[good] ** 2, axis=1))
             frac[m].append(a_m / fl[good])
             on_edge[m].append(edge[i0][good])
 
@@ -152,12 +155,13 @@ def main(argv=None) -> int:
     inl = np.abs(e) < 1.0
     print(f"stereo: {inl.sum()} of {len(e)} matches within 1 px; disparity error {_mean_se(e[inl])} px "
           f"(median disparity {np.median(d):.1f} px); relative depth error {_mean_se(-e[inl] / d[inl] * 100)} %")
-    print(f"| frames after the keyframe | tracks | error along the true flow, px | as % of the flow length | "
+    print(f"| frames after the keyframe | tracks | RMS error, px | error along the true flow, px | as % of the flow length | "
           f"windows within {a.split_edges:.0%} in depth: tracks, % | the others: tracks, % |")
-    print("|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|")
     for m in range(1, a.span + 1):
         x, f, g = np.concatenate(along[m]), np.concatenate(frac[m]), np.concatenate(on_edge[m])
-        print(f"| {m} | {len(x)} | {_mean_se(x)} | {_mean_se(f * 100)} | {(~g).sum()}, {_mean_se(f[~g] * 100)} | "
+        rms = float(np.sqrt(np.mean(np.concatenate(err2[m]))))
+        print(f"| {m} | {len(x)} | {rms:.3f} | {_mean_se(x)} | {_mean_se(f * 100)} | {(~g).sum()}, {_mean_se(f[~g] * 100)} | "
               f"{g.sum()}, {_mean_se(f[g] * 100)} |")
     return 0
 
