@@ -145,11 +145,7 @@ def ideal_windows(render: Path, recs: list[dict], noise_seed: int = 0) -> None:
     from track_bias import cast_to_scene
 
     meta = yaml.safe_load((render / "simulation.yaml").read_text())
-    o = meta["options"]
-    sim = build_sequence(SimulationConfig(meta["preset"], seed=int(meta["seed"]), duration_s=o["duration_s"],
-                                          rate_hz=o["rate_hz"], resolution=tuple(o["resolution"]),
-                                          baseline_m=o["baseline_m"], distortion=o["distortion"],
-                                          image_noise=o["image_noise"], supersample=o["supersample"]))
+    sim = build_sequence(SimulationConfig.from_description(meta))
     # frame k of the written sequence is frame k of the render (KITTI-format renders restart the clock)
     index = {int(t): i for i, t in enumerate(open_sequence(render).stamps_ns)}
     rng = np.random.default_rng(noise_seed)

@@ -29,6 +29,7 @@ import argparse
 import os
 import sys
 import types
+from dataclasses import replace
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
@@ -83,12 +84,8 @@ def main(argv=None) -> int:
               file=sys.stderr)
         return 2
     meta = yaml.safe_load(spec.read_text())
-    o = meta["options"]
-    sim = build_sequence(SimulationConfig(meta["preset"], seed=int(meta["seed"]), duration_s=o["duration_s"],
-                                          rate_hz=o["rate_hz"], resolution=tuple(o["resolution"]),
-                                          baseline_m=o["baseline_m"], distortion=o["distortion"],
-                                          image_noise=o["image_noise"] and not a.no_noise,
-                                          supersample=o["supersample"]))
+    config = SimulationConfig.from_description(meta)
+    sim = build_sequence(replace(config, image_noise=config.image_noise and not a.no_noise))
     seq = open_sequence(a.render)
     kind = "pool" if meta.get("water") else "euroc"
     cfg, sources = resolve_config(RunRequest(sequence=str(a.render), sets=a.sets), kind)

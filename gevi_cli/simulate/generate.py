@@ -70,6 +70,18 @@ class SimulationConfig:
     def spec(self) -> PresetSpec:
         return PRESETS[self.preset]
 
+    @classmethod
+    def from_description(cls, desc: dict) -> "SimulationConfig":
+        """The config of a render from its ``simulation.yaml`` (:meth:`SimulatedSequence.description`):
+        ``build_sequence`` of it gives the same trajectory, scene and IMU again."""
+        o = desc["options"]
+        return cls(desc["preset"], seed=int(desc["seed"]), duration_s=float(o["duration_s"]),
+                   rate_hz=float(o["rate_hz"]), resolution=tuple(int(v) for v in o["resolution"]),
+                   baseline_m=float(o["baseline_m"]), distortion=bool(o["distortion"]),
+                   image_noise=bool(o["image_noise"]), imu=ImuParams(**desc["imu"]),
+                   supersample=int(o["supersample"]),
+                   a_max=float(o["a_max"]) if "a_max" in o else None, moving_start=bool(o.get("moving_start", False)))
+
     def resolved(self) -> "SimulationConfig":
         """A copy with every ``None`` replaced by the preset default."""
         s = self.spec
