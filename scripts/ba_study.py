@@ -257,9 +257,18 @@ def main(argv=None) -> int:
                     help="also solve every window on observations built from the render's truth (see above)")
     ap.add_argument("--noise-seed", type=int, default=0, help="seed of the Gaussian noise of --ideal-tracks")
     args = ap.parse_args(argv)
+    import yaml
+
+    from gevi_cli.simulate.generate import SimulationConfig
+
     for r in args.renders:
         if not (r / "simulation.yaml").is_file():
             print(f"ba_study.py: error: {r}: not a gevi simulate render (no simulation.yaml)", file=sys.stderr)
+            return 2
+        try:  # the truth of --ideal-tracks is rebuilt from it: fail now, not after the runs
+            SimulationConfig.from_description(yaml.safe_load((r / "simulation.yaml").read_text()))
+        except (yaml.YAMLError, ValueError) as err:
+            print(f"ba_study.py: error: {r / 'simulation.yaml'}: {str(err).splitlines()[0]}", file=sys.stderr)
             return 2
     print("| render | variant | windows | R RMS deg | summed R error deg (x, y, z) | t RMS mm |")
     print("|---|---|---|---|---|---|")

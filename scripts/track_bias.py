@@ -83,8 +83,12 @@ def main(argv=None) -> int:
         print(f"track_bias: error: {spec}: not found (RENDER must be a folder written by `gevi simulate`)",
               file=sys.stderr)
         return 2
-    meta = yaml.safe_load(spec.read_text())
-    config = SimulationConfig.from_description(meta)
+    try:
+        meta = yaml.safe_load(spec.read_text())
+        config = SimulationConfig.from_description(meta)
+    except (yaml.YAMLError, ValueError) as err:
+        print(f"track_bias: error: {spec}: {str(err).splitlines()[0]}", file=sys.stderr)
+        return 2
     sim = build_sequence(replace(config, image_noise=config.image_noise and not a.no_noise))
     seq = open_sequence(a.render)
     kind = "pool" if meta.get("water") else "euroc"

@@ -73,14 +73,19 @@ class SimulationConfig:
     @classmethod
     def from_description(cls, desc: dict) -> "SimulationConfig":
         """The config of a render from its ``simulation.yaml`` (:meth:`SimulatedSequence.description`):
-        ``build_sequence`` of it gives the same trajectory, scene and IMU again."""
-        o = desc["options"]
-        return cls(desc["preset"], seed=int(desc["seed"]), duration_s=float(o["duration_s"]),
-                   rate_hz=float(o["rate_hz"]), resolution=tuple(int(v) for v in o["resolution"]),
-                   baseline_m=float(o["baseline_m"]), distortion=bool(o["distortion"]),
-                   image_noise=bool(o["image_noise"]), imu=ImuParams(**desc["imu"]),
-                   supersample=int(o["supersample"]),
-                   a_max=float(o["a_max"]) if "a_max" in o else None, moving_start=bool(o.get("moving_start", False)))
+        ``build_sequence`` of it gives the same trajectory, scene and IMU again.  ValueError (one line)
+        when ``desc`` is not such a description."""
+        try:
+            o = desc["options"]
+            return cls(desc["preset"], seed=int(desc["seed"]), duration_s=float(o["duration_s"]),
+                       rate_hz=float(o["rate_hz"]), resolution=tuple(int(v) for v in o["resolution"]),
+                       baseline_m=float(o["baseline_m"]), distortion=bool(o["distortion"]),
+                       image_noise=bool(o["image_noise"]), imu=ImuParams(**desc["imu"]),
+                       supersample=int(o["supersample"]),
+                       a_max=float(o["a_max"]) if "a_max" in o else None,
+                       moving_start=bool(o.get("moving_start", False)))
+        except (KeyError, TypeError, ValueError) as err:
+            raise ValueError(f"not a gevi simulate description ({type(err).__name__}: {err})") from None
 
     def resolved(self) -> "SimulationConfig":
         """A copy with every ``None`` replaced by the preset default."""

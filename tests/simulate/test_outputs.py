@@ -201,3 +201,8 @@ def test_config_from_its_simulation_yaml_rebuilds_the_same_sequence(extra):
     t = seq.frame_t_ns
     assert np.array_equal(again.frame_t_ns, t)
     assert np.array_equal(again.body_state(t).T_WB, seq.body_state(t).T_WB)
+
+
+def test_config_from_a_broken_description_is_one_value_error():
+    with pytest.raises(ValueError, match="not a gevi simulate description"):
+        SimulationConfig.from_description({"preset": "pool-easy", "seed": 1})
