@@ -1,13 +1,15 @@
 #!/usr/bin/env python3
 """Systematic errors of the front end's tracks on a `gevi simulate` render, against the render's geometry.
 
-    python scripts/track_bias.py RENDER [--keyframes 8] [--span 4] [--no-noise] [--set frontend.KEY=VALUE ...]
+    python scripts/track_bias.py RENDER [--keyframes 8] [--span 4] [--no-noise] [--derotate] [--set frontend.KEY=VALUE ...]
 
 RENDER is a folder written by `gevi simulate` (EuRoC/pool layout; its ``simulation.yaml`` names the
 preset, the seed and the options, so the very frames are re-rendered here, optionally without sensor
 noise).  At ``--keyframes`` frames spread over the sequence a fresh front end (the configuration
 `gevi run` would use, plus ``--set``) detects and stereo-matches as at a keyframe, then tracks the
-next ``--span`` frames.  The truth of a feature is its keyframe-left ray, cast to the scene's planes
+next ``--span`` frames: without a rotation prior, or with ``--derotate`` given the true
+frame-to-frame camera rotation as the prior of its rotation-compensated LK (the pipelines give it
+the gyro's or the last step's rotation, so this is its best case).  The truth of a feature is its keyframe-left ray, cast to the scene's planes
 with the true camera pose, and projected with the true poses into the right image and the following
 frames (rectified pixels).
 
@@ -67,6 +69,8 @@ def main(argv=None) -> int:
     ap.add_argument("--keyframes", type=int, default=8)
     ap.add_argument("--span", type=int, default=4)
     ap.add_argument("--no-noise", action="store_true", help="re-render without sensor noise")
+    ap.add_argument("--derotate", action="store_true",
+                    help="give the front end the true frame-to-frame rotation as its LK rotation prior")
     ap.add_argument("--set", dest="sets", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--split-edges", type=float, default=0.02, metavar="REL",
                     help="also report the features whose LK window (its corners and edge midpoints) "
@@ -93,7 +97,8 @@ def main(argv=None) -> int:
     seq = open_sequence(a.render)
     kind = "pool" if meta.get("water") else "euroc"
     cfg, sources = resolve_config(RunRequest(sequence=str(a.render), sets=a.sets), kind)
-    print(f"{meta['preset']} seed {meta['seed']}: config {', '.join(sources)}; noise {'off' if a.no_noise else 'as rendered'}")
+    print(f"{meta['preset']} seed {meta['seed']}: config {', '.join(sources)}; noise {'off' if a.no_noise else 'as rendered'}; "
+          f"rotation prior {'true rotation' if a.derotate else 'none'}")
 
     def T_WC(k: int) -> np.ndarray:
         return sim.body_state(sim.frame_t_ns[k:k + 1]).T_WB[0] @ sim.rig.T_B_C0
@@ -139,7 +144,9 @@ def main(argv=None) -> int:
         disp_err.append((st.uv_left[ok, 0] - st.uv_right[ok, 0]) - d_t)
         disp_true.append(d_t)
         for m in range(1, a.span + 1):
-            obs = fe.track(frame(k0 + m))
+            # R_cp of the rectified left camera: previous -> current coordinates
+            R_cp = rect.R0 @ T_WC(k0 + m)[:3, :3].T @ T_WC(k0 + m - 1)[:3, :3] @ rect.R0.T
+            obs = fe.track(frame(k0 + m), R_cp if a.derotate else None)
             _, uv = project(k0 + m)
             _, i0, i1 = np.intersect1d(st.ids, obs.ids, assume_unique=True, return_indices=True)
             e = obs.uv[i1] - uv[i0]

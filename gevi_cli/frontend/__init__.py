@@ -20,8 +20,10 @@ class FrontEnd(Protocol):
 
     camera: RectifiedStereo
 
-    def track(self, frame) -> FeatureObs:
-        """Left-image features of ``frame`` with the ids they had in earlier frames."""
+    def track(self, frame, rotation=None) -> FeatureObs:
+        """Left-image features of ``frame`` with the ids they had in earlier frames.  ``rotation``:
+        the back end's predicted rotation ``R_cp`` since the previous frame (rectified left camera,
+        previous -> current coordinates) or None; a front end may use it as a tracking prior."""
 
     def keyframe(self, frame) -> StereoObs:
         """Make ``frame`` a keyframe: (re-)detect where features are missing and match left->right."""

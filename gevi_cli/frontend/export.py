@@ -34,8 +34,9 @@ class ExportFrontEnd:
         self.use_outlier_flags = bool(use_outlier_flags)
         self.timings: dict[str, float] = {"read": float(getattr(export, "read_seconds", 0.0))}
 
-    def track(self, frame: TrackFrame) -> FeatureObs:
-        """The frame's tracked left-image features (ids as in the export's stereo matches)."""
+    def track(self, frame: TrackFrame, rotation=None) -> FeatureObs:
+        """The frame's tracked left-image features (ids as in the export's stereo matches); the
+        rotation prior is not needed (the tracks are already made)."""
         obs = frame.obs
         if self.use_outlier_flags and frame.outlier.any():
             keep = ~frame.outlier

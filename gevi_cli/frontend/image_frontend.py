@@ -3,9 +3,10 @@
 Pixels are pixels of the *rectified* images (:attr:`ImageFrontEnd.camera`); ids int64, increasing,
 never reused.  Per frame (protocol :class:`~gevi_cli.frontend.FrontEnd`):
 
-- ``track(frame)``: rectify the left image (and remove its lamp shading when ``shading_px`` is set,
-  :mod:`~gevi_cli.frontend.shading`), LK from the previous frame (forward-backward checked),
-  drop the failures.  The first call detects instead.
+- ``track(frame, rotation)``: rectify the left image (and remove its lamp shading when ``shading_px``
+  is set, :mod:`~gevi_cli.frontend.shading`), LK from the previous frame (forward-backward checked;
+  with the predicted camera rotation removed first, :mod:`~gevi_cli.frontend.derotate`), drop the
+  failures.  The first call detects instead.
 - ``keyframe(frame)`` (same frame, after ``track``): detect in the grid cells without a feature
   (new ids), rectify the right image and match all current features left -> right.  Only the
   matched ones are returned; the unmatched stay tracked.
@@ -22,14 +23,15 @@ import numpy as np
 
 from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.frontend.config import FrontendConfig
+from gevi_cli.frontend.derotate import apply_homography, derotate, rotation_angle_deg, rotation_homography
 from gevi_cli.frontend.grid import GridDetector
-from gevi_cli.frontend.klt import Pyramid, build_pyramid, track_lk
+from gevi_cli.frontend.klt import Pyramid, build_pyramid, in_image, track_lk
 from gevi_cli.frontend.rectify import Rectifier
 from gevi_cli.frontend.shading import remove_shading
 from gevi_cli.frontend.stereo import match_stereo
 from gevi_cli.frontend.types import FeatureObs, RectifiedStereo, StereoObs
 
-STAGES = ("rectify", "pyramid", "lk", "detect", "stereo")
+STAGES = ("rectify", "pyramid", "derotate", "lk", "detect", "stereo")
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -62,10 +64,14 @@ class ImageFrontEnd:
         self.timings: dict[str, float] = dict.fromkeys(STAGES, 0.0)
 
     # -- protocol ---------------------------------------------------------------------------------
-    def track(self, frame) -> FeatureObs:
-        """Left features of ``frame`` (rectified pixels) with the ids they had before."""
+    def track(self, frame, rotation: np.ndarray | None = None) -> FeatureObs:
+        """Left features of ``frame`` (rectified pixels) with the ids they had before.
+
+        ``rotation``: predicted ``R_cp`` (3, 3), previous rectified-left camera coordinates ->
+        current ones; removed before LK when ``cfg.derotate`` is on and it exceeds
+        ``cfg.derotate_min_deg`` (None: track as is)."""
         self.timings = dict.fromkeys(STAGES, 0.0)
-        self._track(frame)
+        self._track(frame, rotation)
         return FeatureObs(self.ids, self.uv)
 
     def keyframe(self, frame) -> StereoObs:
@@ -114,7 +120,7 @@ class ImageFrontEnd:
         self.ids = _frozen(np.concatenate([self.ids, ids]))
         self.uv = _frozen(np.concatenate([self.uv, uv_new]))
 
-    def _track(self, frame) -> int:
+    def _track(self, frame, rotation: np.ndarray | None = None) -> int:
         """Bring the state to ``frame`` (idempotent per ``t_ns``); returns its stamp."""
         if frame is None:
             raise ValueError("frame is None")
@@ -131,11 +137,30 @@ class ImageFrontEnd:
                 first = self._detect(pyr.image, None)
             self._add(first)
         elif len(self.uv):
-            with self._timed("lk"):
-                uv, ok = track_lk(self._left, pyr, self.uv, self.cfg)
+            H = self._derotation(rotation)
+            if H is None:
+                with self._timed("lk"):
+                    uv, ok = track_lk(self._left, pyr, self.uv, self.cfg)
+            else:
+                with self._timed("derotate"):
+                    pyr_d = build_pyramid(derotate(pyr.image, H), self.cfg)
+                with self._timed("lk"):
+                    uv, ok = track_lk(self._left, pyr_d, self.uv, self.cfg)
+                    uv = apply_homography(H, uv)  # (NaN stays NaN)
+                    ok &= in_image(uv, pyr.shape)
             self.ids, self.uv = _frozen(self.ids[ok]), _frozen(uv[ok])
         self._t_ns, self._left, self._right, self._stereo = t_ns, pyr, None, None
         return t_ns
+
+
+    def _derotation(self, rotation: np.ndarray | None) -> np.ndarray | None:
+        """The homography removing ``rotation`` (None when off, absent or too small to matter)."""
+        if not self.cfg.derotate or rotation is None:
+            return None
+        R = np.asarray(rotation, dtype=float)
+        if R.shape != (3, 3) or not np.all(np.isfinite(R)) or rotation_angle_deg(R) < self.cfg.derotate_min_deg:
+            return None
+        return rotation_homography(R, self.camera.K)
 
 
 class _Timer:

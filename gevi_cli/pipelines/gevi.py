@@ -222,6 +222,14 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         self.t_prev = t_ns
         return res
 
+    def rotation_prior(self):
+        """The gyro's rotation since the previous frame, in rectified-left camera coordinates
+        (``R_cp = R_ic^T exp(rotvec)^T R_ic``); constant angular velocity over an IMU gap."""
+        rv = self.cur.rotvec if self.cur is not None and self.t_prev is not None else None
+        if rv is None or not np.all(np.isfinite(rv)):
+            return super().rotation_prior()
+        return self.R_ic.T @ est.exp_so3(rv).T @ self.R_ic
+
     def _bridge(self, t_ns: int):
         """A frame that cannot be tracked visually: at rest while the IMU shows the starting standstill,
         else IMU preintegration from the last pose and velocity (constant velocity where the IMU has a gap)."""

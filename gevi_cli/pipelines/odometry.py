@@ -115,7 +115,7 @@ class KeyframeOdometry:
         self.index += 1
         timings: dict[str, float] = {}
         t0 = time.perf_counter()
-        obs = self.frontend.track(frame)
+        obs = self.frontend.track(frame, self.rotation_prior())
         self.obs = obs  # the front end's features of this frame (ids, pixels), for what subclasses judge from them
         timings.update({f"fe_{k}": v for k, v in getattr(self.frontend, "timings", {}).items()})
         timings["frontend"] = time.perf_counter() - t0
@@ -163,6 +163,14 @@ class KeyframeOdometry:
         res.timings = timings
         self._tail = (frame, res)
         return res
+
+    def rotation_prior(self) -> np.ndarray | None:
+        """Predicted rotation ``R_cp`` (previous -> current rectified-left camera coordinates) of the
+        frame about to be tracked, for the front end's rotation-compensated LK: constant angular
+        velocity, the last step's rotation (None before two frames)."""
+        if self.T_w_last is None:
+            return None
+        return self.velocity[:3, :3].T
 
     def _bridge(self, t_ns: int) -> tuple[np.ndarray, str]:
         """Pose of a frame that could not be tracked: constant velocity from the last pose (``bridged``)."""
