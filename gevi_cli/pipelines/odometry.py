@@ -166,11 +166,10 @@ class KeyframeOdometry:
 
     def rotation_prior(self) -> np.ndarray | None:
         """Predicted rotation ``R_cp`` (previous -> current rectified-left camera coordinates) of the
-        frame about to be tracked, for the front end's rotation-compensated LK: constant angular
-        velocity, the last step's rotation (None before two frames)."""
-        if self.T_w_last is None:
-            return None
-        return self.velocity[:3, :3].T
+        frame about to be tracked, for the front end's rotation-compensated LK.  None here: the
+        front end predicts it from its own tracks (not from our poses, so that a pose going wrong
+        cannot steer the tracks, and the ``--pnp`` ablations share one front end); GeVI gives the gyro's."""
+        return None
 
     def _bridge(self, t_ns: int) -> tuple[np.ndarray, str]:
         """Pose of a frame that could not be tracked: constant velocity from the last pose (``bridged``)."""
