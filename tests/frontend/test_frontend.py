@@ -26,6 +26,7 @@ from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
 from gevi_cli.estimators.lie import exp_so3
 from gevi_cli.frontend.config import FrontendConfig
 from gevi_cli.frontend.grid import GridDetector, detect_grid
+from gevi_cli.frontend.derotate import apply_homography, fit_inplane
 from gevi_cli.frontend.image_frontend import STAGES, ImageFrontEnd
 from gevi_cli.frontend.klt import build_pyramid, track_lk
 from gevi_cli.frontend.rectify import Rectifier
@@ -103,6 +104,38 @@ def test_rotation_prior_removes_lks_rotation_bias(deg):
         p95[name] = np.percentile(np.linalg.norm(o1.uv[i1] - truth, axis=1), 95)
     assert p95["plain"] > 0.1
     assert p95["derotated"] < 0.05
+
+
+def test_without_a_prior_the_last_steps_image_rotation_is_removed():
+    """CFO gives no rotation prior: the front end then predicts the next step's rotation from the
+    last step's tracks (constant angular velocity, in the image plane).  Turning 3 deg per frame,
+    the second step is derotated and as precise as the exact prior."""
+    h, w, step = 240, 320, np.radians(3.0)
+    fe = ImageFrontEnd(_rectified_rig(h, w), CFG)
+    c = np.array([(w - 1) / 2, (h - 1) / 2])
+    obs = [fe.track(SimpleNamespace(left=texture(h, w, turn=k * step), right=None, t_ns=k)) for k in range(2)]
+    assert fe.timings["derotate"] == 0.0  # first step: nothing to predict from
+    img2 = texture(h, w, turn=2 * step)
+    obs.append(fe.track(SimpleNamespace(left=img2, right=img2, t_ns=2)))
+    assert fe.timings["derotate"] > 0.0
+    _, i1, i2 = np.intersect1d(obs[1].ids, obs[2].ids, assume_unique=True, return_indices=True)
+    d = obs[1].uv[i1] - c
+    truth = c + d @ np.array([[np.cos(step), -np.sin(step)], [np.sin(step), np.cos(step)]]).T
+    assert len(i2) > 50
+    assert np.percentile(np.linalg.norm(obs[2].uv[i2] - truth, axis=1), 95) < 0.05
+
+
+def test_fit_inplane_recovers_rotation_and_shift_despite_outliers():
+    rng = np.random.default_rng(3)
+    p = rng.uniform(0, 700, (200, 2))
+    th = np.radians(2.5)
+    H = np.array([[np.cos(th), -np.sin(th), 4.0], [np.sin(th), np.cos(th), -7.0], [0, 0, 1]])
+    q = apply_homography(H, p) + rng.normal(0, 0.1, p.shape)
+    q[:20] += rng.uniform(-30, 30, (20, 2))  # 10 % bad tracks
+    H_fit, deg = fit_inplane(p, q)
+    assert abs(deg - 2.5) < 0.01  # 0.1 px noise over a ~700 px spread: ~1e-4 rad
+    assert np.abs(apply_homography(H_fit, p[20:]) - apply_homography(H, p[20:])).max() < 0.1
+    assert fit_inplane(p[:7], q[:7]) is None
 
 
 def test_rotation_prior_below_the_threshold_is_not_applied():
