@@ -79,15 +79,16 @@ def _ref_draw3(rng, n, B):
     return idx
 
 
-def _ref_ransac(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_iter=1000, batch=8):
+def _ref_ransac(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_iter=1000, batch=8, first_batch=2):
     rng = np.random.default_rng(seed)
     n = len(z)
     zh, qh = homogeneous(z), homogeneous(q)
     u_all, w_all = zh @ L_k.T, qh @ L_c.T
     best = (-1, np.inf, None, None)
-    it, n_req = 0, max_iter
+    it, n_req, k = 0, max_iter, 0
     while it < min(n_req, max_iter):
-        B = min(batch, max_iter - it)
+        B = min(min(first_batch * 2 ** k, batch), max_iter - it)  # batches of 2, 4, 8, 8, ...
+        k += 1
         idx = np.argsort(rng.random((B, n)), axis=1)[:, :3] if n <= 64 else _ref_draw3(rng, n, B)
         _, psi, tau = _ref_solve_batch(u_all[idx], w_all[idx])
         it += B
