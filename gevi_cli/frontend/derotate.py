@@ -16,11 +16,10 @@ How: with ``R`` the rotation taking previous-camera coordinates into current-cam
 homography ``H = K R K^-1``, exactly for every depth.  The current image is resampled at ``H x``
 (bilinear) so that it shows the scene with the previous frame's orientation; LK then sees only the
 translation's parallax, and each tracked pixel is mapped back by ``H``.  ``R`` is a *prediction*:
-GeVI's gyro, or, when the back end has none (CFO), the image rotation that best explains the last
-step's tracks (:func:`fit_inplane`, constant angular velocity; only about the optical axis).  The front end makes that fit itself rather
-than take the back end's last pose: a pose estimator going wrong would otherwise steer the tracks
-that feed it (measured: ``--pnp epnp`` on pool-hard_s1 drifted 5-10 deg per frame there and then lost
-69 frames), and the ``--pnp`` ablations would no longer share one front end.
+GeVI's gyro; CFO's last step, when that step's pose kept at least half of its matches
+(``KeyframeOdometry.rotation_prior``); else the image rotation that best explains the last step's
+tracks (:func:`fit_inplane`, about the optical axis only).  An error in the prediction only leaves
+part of the rotation in, as without compensation.
 """
 from __future__ import annotations
 
@@ -53,7 +52,7 @@ def fit_inplane(uv_prev: np.ndarray, uv_cur: np.ndarray, min_points: int = 8) ->
     least squares), refitted once without the pairs more than 3x the median residual away (moving
     objects, bad tracks).  Only the rotation *in the image plane*: a full 3-D rotation fitted to
     tracks also absorbs a sideways translation as a tilt, and warping by that tilt stretches the
-    image (measured on pool-easy_s2: ATE 1.44 mm against 0.78 with the in-plane part only).
+    image (measured on pool-easy_s2, CFO: ATE 1.44 mm against 0.74 with the in-plane part only).
     None with fewer than ``min_points`` pairs."""
     keep = np.ones(len(uv_prev), dtype=bool)
     out = None

@@ -224,7 +224,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
 
     def rotation_prior(self):
         """The gyro's rotation since the previous frame, in rectified-left camera coordinates
-        (``R_cp = R_ic^T exp(rotvec)^T R_ic``); over an IMU gap the front end's own prediction."""
+        (``R_cp = R_ic^T exp(rotvec)^T R_ic``); over an IMU gap the last step's, as CFO."""
         rv = self.cur.rotvec if self.cur is not None and self.t_prev is not None else None
         if rv is None or not np.all(np.isfinite(rv)):
             return super().rotation_prior()

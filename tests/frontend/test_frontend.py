@@ -107,8 +107,9 @@ def test_rotation_prior_removes_lks_rotation_bias(deg):
 
 
 def test_without_a_prior_the_last_steps_image_rotation_is_removed():
-    """CFO gives no rotation prior: the front end then predicts the next step's rotation from the
-    last step's tracks (constant angular velocity, in the image plane).  Turning 3 deg per frame,
+    """Without a rotation prior from the back end (CFO after a poorly verified step) the front end
+    predicts the next step's rotation from the last step's tracks (constant angular velocity, in
+    the image plane).  Turning 3 deg per frame,
     the second step is derotated and as precise as the exact prior."""
     h, w, step = 240, 320, np.radians(3.0)
     fe = ImageFrontEnd(_rectified_rig(h, w), CFG)
