@@ -1,0 +1,38 @@
+"""The rotation prior the odometry hands its front end (rotation-compensated LK, method.md 12.1)."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from gevi_cli.estimators.lie import exp_so3
+from gevi_cli.frontend.types import RectifiedStereo
+from gevi_cli.pipelines.config import OdometryConfig
+from gevi_cli.pipelines.odometry import KeyframeOdometry
+from gevi_cli.pipelines.types import BRIDGED, OK, FrameResult
+
+
+def _odometry(n_matches: int, n_inliers: int, status: str = OK) -> KeyframeOdometry:
+    fe = SimpleNamespace(camera=RectifiedStereo(752, 480, 450.0, 450.0, 376.0, 240.0, 0.1))
+    odo = KeyframeOdometry(fe, OdometryConfig())
+    R_pc = exp_so3(np.array([0.01, -0.02, 0.03]))  # pose of the current camera in the previous one
+    odo.velocity = np.eye(4)
+    odo.velocity[:3, :3] = R_pc
+    odo._tail = (None, FrameResult(1, 1, np.eye(4), status=status, n_matches=n_matches, n_inliers=n_inliers))
+    return odo
+
+
+def test_prior_is_the_last_steps_rotation_in_previous_to_current_coordinates():
+    odo = _odometry(100, 80)
+    R_cp = odo.rotation_prior()
+    # R_cp maps previous-camera coordinates into the current camera: the inverse of the pose's rotation
+    assert np.allclose(R_cp @ odo.velocity[:3, :3], np.eye(3), atol=1e-12)
+
+
+def test_no_prior_after_a_poorly_verified_or_bridged_step():
+    assert _odometry(100, 49).rotation_prior() is None  # fewer than half the matches kept
+    assert _odometry(100, 50).rotation_prior() is not None
+    assert _odometry(100, 90, status=BRIDGED).rotation_prior() is None
+    odo = _odometry(100, 90)
+    odo._tail = None  # nothing tracked yet
+    assert odo.rotation_prior() is None
