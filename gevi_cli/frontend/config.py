@@ -52,6 +52,15 @@ class FrontendConfig:
     even near 0.3 deg.  It also keeps gyro vibration (euroc_micro at rest: 0.06-0.11 deg per frame)
     from warping the images of a camera that does not turn."""
 
+    derotate_prior: str = "pose"
+    """Where the rotation to remove comes from when there is no gyro (CFO): "pose", the odometry's
+    last step (its full 3-D rotation; only after a step whose pose kept at least half its matches,
+    else as "image"), or "image", the front end's fit of the last step's tracks with a rotation in
+    the image plane plus a shift.  "image" is decoupled from the pose estimator and sees only the
+    rotation about the optical axis: right for a downward camera over a floor (configs/pool.yaml),
+    wrong for a forward camera, where a turn's parallax reads as a spurious in-plane rotation
+    (method.md 12.1)."""
+
     fb_max_px: float = 0.5
     """Forward-backward check: tracking back must land within this distance (px) of the start."""
 
@@ -77,6 +86,8 @@ class FrontendConfig:
         if not 0.0 < self.quality_percentile <= 100.0 or self.shading_px < 0:
             raise ValueError(f"need 0 < quality_percentile <= 100 and shading_px >= 0, got "
                              f"{self.quality_percentile}, {self.shading_px}")
+        if self.derotate_prior not in ("pose", "image"):
+            raise ValueError(f"derotate_prior must be 'pose' or 'image', got {self.derotate_prior!r}")
         if self.derotate_min_deg < 0:
             raise ValueError(f"need derotate_min_deg >= 0, got {self.derotate_min_deg}")
         if not 0.0 < self.min_depth_m < self.max_depth_m:
