@@ -53,13 +53,13 @@ class FrontendConfig:
     from warping the images of a camera that does not turn."""
 
     derotate_prior: str = "pose"
-    """Where the rotation to remove comes from when there is no gyro (CFO): "pose", the odometry's
-    last step (its full 3-D rotation; only after a step whose pose kept at least half its matches,
-    else as "image"), or "image", the front end's fit of the last step's tracks with a rotation in
-    the image plane plus a shift.  "image" is decoupled from the pose estimator and sees only the
-    rotation about the optical axis: right for a downward camera over a floor (configs/pool.yaml),
-    wrong for a forward camera, where a turn's parallax reads as a spurious in-plane rotation
-    (method.md 12.1)."""
+    """Where the rotation to remove comes from: "pose", the back end's (GeVI: the gyro's; CFO: the
+    odometry's last step, its full 3-D rotation, only after a step whose pose kept at least half its
+    matches, else as "image"), or "image", the front end's fit of the last step's tracks with a
+    rotation in the image plane plus a shift, for both methods.  "image" is decoupled from the pose
+    and sees only the rotation about the optical axis: better for a downward camera over a floor
+    (configs/pool.yaml), wrong for a forward camera, where a turn's parallax reads as a spurious
+    in-plane rotation (method.md 12.1)."""
 
     fb_max_px: float = 0.5
     """Forward-backward check: tracking back must land within this distance (px) of the start."""

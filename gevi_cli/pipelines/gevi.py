@@ -224,7 +224,10 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
 
     def rotation_prior(self):
         """The gyro's rotation since the previous frame, in rectified-left camera coordinates
-        (``R_cp = R_ic^T exp(rotvec)^T R_ic``); over an IMU gap the last step's, as CFO."""
+        (``R_cp = R_ic^T exp(rotvec)^T R_ic``); over an IMU gap the last step's, as CFO.  With
+        ``frontend.derotate_prior`` "image" none: the front end's in-plane fit, as for CFO."""
+        if self.cfg.frontend.derotate_prior == "image":
+            return None  # the front end's in-plane fit (configs/pool.yaml): pool-hard_s1 50 mm against 292 with the gyro's
         rv = self.cur.rotvec if self.cur is not None and self.t_prev is not None else None
         if rv is None or not np.all(np.isfinite(rv)):
             return super().rotation_prior()

@@ -42,3 +42,18 @@ def test_image_prior_config_leaves_the_prediction_to_the_front_end():
     odo = _odometry(100, 90)
     odo.cfg.frontend.derotate_prior = "image"  # configs/pool.yaml
     assert odo.rotation_prior() is None
+
+
+def test_gevi_takes_the_gyro_unless_the_config_says_image():
+    from gevi_cli.pipelines.gevi import GeviOdometry
+
+    gevi = GeviOdometry.__new__(GeviOdometry)  # only what rotation_prior reads
+    gevi.cfg = OdometryConfig()
+    gevi.R_ic = exp_so3(np.array([0.3, -0.2, 1.0]))
+    rv = np.array([0.002, -0.001, 0.02])
+    gevi.cur, gevi.t_prev, gevi._tail = SimpleNamespace(rotvec=rv), 0, None
+    R_cp = gevi.rotation_prior()
+    # the camera's rotation since the previous frame, previous -> current coordinates
+    assert np.allclose(R_cp, (gevi.R_ic.T @ exp_so3(rv) @ gevi.R_ic).T, atol=1e-12)
+    gevi.cfg.frontend.derotate_prior = "image"
+    assert gevi.rotation_prior() is None
