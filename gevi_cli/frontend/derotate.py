@@ -32,12 +32,6 @@ def rotation_homography(R_cp: np.ndarray, K: np.ndarray) -> np.ndarray:
     return K @ np.asarray(R_cp, dtype=float) @ np.linalg.inv(K)
 
 
-def rotation_angle_deg(R: np.ndarray) -> float:
-    """Angle of the rotation ``R`` (degrees)."""
-    c = (np.trace(R) - 1.0) / 2.0
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
-
-
 def derotate(img_cur: np.ndarray, H: np.ndarray) -> np.ndarray:
     """The current image seen with the previous orientation: ``out(x) = img_cur(H x)`` (bilinear;
     pixels from outside the image replicate its border, which the caller's in-image test rejects)."""

@@ -23,7 +23,8 @@ import numpy as np
 
 from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.frontend.config import FrontendConfig
-from gevi_cli.frontend.derotate import apply_homography, derotate, fit_inplane, rotation_angle_deg, rotation_homography
+from gevi_cli.estimators.lie import log_so3
+from gevi_cli.frontend.derotate import apply_homography, derotate, fit_inplane, rotation_homography
 from gevi_cli.frontend.grid import GridDetector
 from gevi_cli.frontend.klt import Pyramid, build_pyramid, in_image, track_lk
 from gevi_cli.frontend.rectify import Rectifier
@@ -61,7 +62,7 @@ class ImageFrontEnd:
         self._right: Pyramid | None = None     # its rectified right image, made by keyframe() only
         self._stereo: StereoObs | None = None  # its keyframe result, if keyframe() ran
         self._disparity_prior: float | None = None
-        self._step_fit: tuple[np.ndarray, float] | None = None  # (H, degrees) of the last step's image rotation
+        self._step: tuple[np.ndarray, np.ndarray] | None = None  # the last step's tracks (before, after)
         self.timings: dict[str, float] = dict.fromkeys(STAGES, 0.0)
 
     # -- protocol ---------------------------------------------------------------------------------
@@ -149,24 +150,25 @@ class ImageFrontEnd:
                     uv, ok = track_lk(self._left, pyr_d, self.uv, self.cfg)
                     uv = apply_homography(H, uv)  # (NaN stays NaN)
                     ok &= in_image(uv, pyr.shape)
-            if self.cfg.derotate:
-                self._step_fit = fit_inplane(self.uv[ok], uv[ok])
-            self.ids, self.uv = _frozen(self.ids[ok]), _frozen(uv[ok])
+            uv_ok = _frozen(uv[ok])
+            self._step = (self.uv[ok], uv_ok)
+            self.ids, self.uv = _frozen(self.ids[ok]), uv_ok
         self._t_ns, self._left, self._right, self._stereo = t_ns, pyr, None, None
         return t_ns
-
 
     def _derotation(self, rotation: np.ndarray | None) -> np.ndarray | None:
         """The homography (previous -> current pixels) to remove before LK: of the back end's
         ``rotation``, else of the last step's image rotation; None when off or too small to matter."""
         if not self.cfg.derotate:
             return None
-        if rotation is None:
-            if self._step_fit is None or self._step_fit[1] < self.cfg.derotate_min_deg:
+        if rotation is None:  # fitted only when needed: with a back-end prior it is not
+            fit = fit_inplane(*self._step) if self._step is not None else None
+            if fit is None or fit[1] < self.cfg.derotate_min_deg:
                 return None
-            return self._step_fit[0]
+            return fit[0]
         R = np.asarray(rotation, dtype=float)
-        if R.shape != (3, 3) or not np.all(np.isfinite(R)) or rotation_angle_deg(R) < self.cfg.derotate_min_deg:
+        if (R.shape != (3, 3) or not np.all(np.isfinite(R))
+                or np.degrees(np.linalg.norm(log_so3(R))) < self.cfg.derotate_min_deg):
             return None
         return rotation_homography(R, self.camera.K)
 

@@ -169,12 +169,13 @@ class KeyframeOdometry:
         frame about to be tracked, for the front end's rotation-compensated LK: the last step's
         rotation (constant angular velocity), when that step was tracked and at least half of its
         matches passed the pose's verification, and ``frontend.derotate_prior`` is "pose"; else None
-        (the front end then predicts the rotation in the image plane from its own tracks).  The inlier test keeps a pose estimator
-        that is going wrong from steering the tracks that feed it: with the prior always on,
-        ``--pnp epnp`` on pool-hard_s1 drifted 5-10 deg per frame from frame 271 (inliers 27 of 60)
-        and lost 69 frames."""
+        (the front end then predicts the rotation in the image plane from its own tracks).  The
+        inlier test keeps a pose estimator that is going wrong from steering the tracks that feed
+        it: with the prior always on, ``--pnp epnp`` on pool-hard_s1 drifted 5-10 deg per frame from
+        frame 271 (inliers 27 of 60) and lost 69 frames."""
         last = self._tail[1] if self._tail is not None else None
-        if self.cfg.frontend.derotate_prior != "pose" or last is None or last.status != OK or last.n_inliers < 0.5 * max(last.n_matches, 1):
+        if (self.cfg.frontend.derotate_prior != "pose" or last is None or last.status != OK
+                or last.n_inliers < 0.5 * max(last.n_matches, 1)):
             return None
         return self.velocity[:3, :3].T
 
