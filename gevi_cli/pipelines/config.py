@@ -178,6 +178,11 @@ class FusionConfig:
                                        "twice-integrated IMU (pipelines/window_gravity.py), where the frames span at "
                                        "least 1 s; elsewhere, and with 0, the specific force minus acc_window_s's "
                                        "acceleration")
+    bias_window_s: float = opt(20.0, "accelerometer bias in flight [PROPOSAL]: the horizontal bias re-estimated at each "
+                                     "keyframe from the window gravity of the last this many seconds against the "
+                                     "gyro-chained orientations (yaw separates a body-fixed bias from gravity, "
+                                     "pipelines/acc_bias.py); 0: the bias of the initialisation throughout")
+    bias_max_std: float = opt(0.02, "that estimate is adopted when its posterior std (m/s^2, horizontal) is below this")
     acc_order: int = opt(0, "degree of that position fit: 0 chooses 2 or 3 per frame by the smaller estimated mean "
                             "squared error (the lag of 2 against the noise of 3); 2 or 3 forces it")
 
@@ -222,6 +227,10 @@ class OdometryConfig:
             raise GeviError(f"{where}: fusion.acc_window_s", f"must be >= 0 (s), got {self.fusion.acc_window_s}")
         if not self.fusion.gravity_window_s >= 0:
             raise GeviError(f"{where}: fusion.gravity_window_s", f"must be >= 0 (s), got {self.fusion.gravity_window_s}")
+        if not self.fusion.bias_window_s >= 0:
+            raise GeviError(f"{where}: fusion.bias_window_s", f"must be >= 0 (s), got {self.fusion.bias_window_s}")
+        if not self.fusion.bias_max_std > 0:
+            raise GeviError(f"{where}: fusion.bias_max_std", f"must be > 0 (m/s^2), got {self.fusion.bias_max_std}")
         if not self.pnp.step_tol >= 0:
             raise GeviError(f"{where}: pnp.step_tol", f"must be >= 0, got {self.pnp.step_tol}")
         if not self.pnp.max_refine_steps >= 1:

@@ -45,6 +45,7 @@ from gevi_cli.pipelines.inertial_init import (GEVI, INIT, STANDSTILL, VISUAL, Fr
                                               tilt_of, yaw_of)
 from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches, _make_T
 from gevi_cli.pipelines.recent_motion import RecentMotion
+from gevi_cli.pipelines.acc_bias import AccBiasTracker
 from gevi_cli.pipelines.window_gravity import WindowGravity
 from gevi_cli.pipelines.pose6 import opencv_pnp, reprojection_median_px, tracked_pose6
 from gevi_cli.pipelines.types import INERTIAL, OK
@@ -53,7 +54,8 @@ from gevi_cli.pipelines.verification import FivePointL1Verification, ThreePointV
 
 #: imu_states.csv columns (angles rad, biases rad/s and m/s^2, Sigma dimensionless unit-vector variance)
 STATE_COLUMNS = ("index", "t_ns", "phase", "roll", "pitch", "yaw", "bgx", "bgy", "bgz", "bax", "bay", "baz",
-                 "sigma_trace", "s_xx", "s_yy", "s_zz", "s_xy", "s_xz", "s_yz", "tilt_std", "ransac_iters")
+                 "ba_std", "sigma_trace", "s_xx", "s_yy", "s_zz", "s_xy", "s_xz", "s_yz", "tilt_std",
+                 "ransac_iters")
 
 
 class GeviOdometry(InertialInitialisation, KeyframeOdometry):
@@ -78,6 +80,8 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         self.phase = INIT
         self.mode = INIT  # how the current frame is tracked: INIT / GEVI / VISUAL
         self.b_g, self.b_a = np.zeros(3), np.zeros(3)
+        self.bias_std = float("nan")  # posterior std of the in-flight horizontal b_a estimate (m/s^2)
+        self.bias_updates: list[float] = []  # seconds since the first frame of each in-flight b_a adoption
         self.tilt = np.zeros(2)
         self.tilt_pred = np.zeros(2)
         self.tilt_cov = np.eye(2)
@@ -107,6 +111,10 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         self.motion = RecentMotion(cfg.fusion.acc_window_s, cfg.fusion.acc_order)
         # gravity in the body frame from the same frames and the preintegrated IMU (window_gravity.py)
         self.wgrav = WindowGravity(cfg.fusion.gravity_window_s) if cfg.fusion.gravity_window_s > 0 else None
+        # the horizontal accelerometer bias from yaw changes (acc_bias.py); it reads the window gravity
+        self.bias_track = AccBiasTracker(cfg.fusion.bias_window_s, cfg.init.ba_prior_sigma,
+                                         walk=imu.noise.acc_random_walk) \
+            if cfg.fusion.bias_window_s > 0 and self.wgrav is not None else None
 
     # --------------------------------------------------------------------------------- helpers
     def _levelling(self):
@@ -213,6 +221,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
             if self.still:
                 self.v_W = np.zeros(3)
             self._refine_acc_bias(res)
+            self._track_acc_bias(res)
         self.cur.tilt = self.tilt.copy()
         if res.keyframe or self.kf is None:
             self._new_window(res)
@@ -489,12 +498,15 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         tilt_std = float(np.sqrt(np.trace(self.tilt_cov) / 2)) if np.all(np.isfinite(self.tilt_cov)) else np.nan
         return {"index": res.index, "t_ns": res.t_ns, "phase": phase, "roll": float(self.tilt[0]),
                 "pitch": float(self.tilt[1]), "yaw": yaw_of(R_wi), "bgx": self.b_g[0], "bgy": self.b_g[1],
-                "bgz": self.b_g[2], "bax": self.b_a[0], "bay": self.b_a[1], "baz": self.b_a[2],
+                "bgz": self.b_g[2], "bax": self.b_a[0], "bay": self.b_a[1], "baz": self.b_a[2], "ba_std": self.bias_std,
                 "sigma_trace": float(np.trace(S)), "s_xx": S[0, 0], "s_yy": S[1, 1], "s_zz": S[2, 2], "s_xy": S[0, 1],
                 "s_xz": S[0, 2], "s_yz": S[1, 2], "tilt_std": tilt_std,
                 "ransac_iters": getattr(self.gevi_verify, "iterations", 0) if self.mode == GEVI else 0}
 
     def summary(self) -> dict:
         """What status.json records about the IMU side of the run."""
+        flight = {"updates": len(self.bias_updates), "first_at_s": self.bias_updates[0] if self.bias_updates else None,
+                  "last_std": None if np.isnan(self.bias_std) else self.bias_std}
         return {"initialisation": self.init_info, "gyro_bias": self.b_g.tolist(), "acc_bias": self.b_a.tolist(),
+                "acc_bias_in_flight": flight,
                 "imu_gaps": self.gaps, "initialised": self.phase != INIT}

@@ -275,3 +275,28 @@ class InertialInitialisation:
             self.b_a = self.b_a + up * float(up @ (r.b_a - self.b_a))
             info["adopted"] = self.b_a.tolist()
         self.init_info["acc_bias_refined"] = info
+
+    def _track_acc_bias(self, res) -> None:
+        """The horizontal accelerometer bias in flight (acc_bias.py): each visually tracked frame's window
+        gravity into the tracker, chained by the gyro to the frame before when that one is in it too;
+        at keyframes the estimate is adopted when its posterior std is below ``fusion.bias_max_std``
+        [PROPOSAL]."""
+        bt = self.bias_track
+        if bt is None or self.still or self.phase == INIT:
+            return
+        up = self.wgrav.up(res.t_ns) if res.status == OK and len(self.wgrav) else None
+        if up is None:
+            bt.reset()
+            return
+        chained = len(bt) and self.t_prev is not None and int(bt.t[-1]) == self.t_prev
+        bt.add(res.t_ns, self.cur.rotvec if chained else None, up, self.b_a)
+        if not res.keyframe:
+            return
+        sol = bt.solve(self.b_a)
+        if sol is None:
+            return
+        b, std = sol
+        self.bias_std = std
+        if std < self.cfg.fusion.bias_max_std:
+            self.b_a = b
+            self.bias_updates.append((res.t_ns - self.t_first) * 1e-9)
