@@ -1,5 +1,5 @@
-"""Horizontal accelerometer bias tracked online from yaw changes [PROPOSAL, ours] (docs/method.md,
-"Accelerometer bias in flight").
+"""Horizontal accelerometer bias tracked online from yaw changes [PROPOSAL, ours] (docs/method.md 9b,
+"The horizontal bias in flight").
 
 Why: every gravity direction GeVI compares with (the specific force, or the window gravity of
 window_gravity.py) is off by ``b_h / g`` rad for a horizontal accelerometer-bias error ``b_h``.  A
@@ -11,7 +11,9 @@ gyro alone (no accelerometer in the rotations), ``Q_j = R_0^T R_j``; the up dire
 j then reads ``u_j = Q_j^T w + b / g`` with ``w`` the world up in body-0 coordinates.  When the
 vehicle yaws, ``Q_j^T w`` turns in the body while ``b / g`` does not, so both are found by linear
 least squares over a window of ``T`` seconds.  A slow gyro-bias error tilts the chained frames
-linearly in time; ``w + omega tau_j`` takes it up.  The bias enters with a Gaussian prior at the
+linearly in time; ``w + omega tau_j`` takes it up.  The bias random-walks, so it enters as
+``beta + beta' tau_j`` (its trend over the window, with the prior of a Brownian path's slope), and
+what is returned is its value at the last frame.  The bias enters with a Gaussian prior at the
 current estimate, so without yaw the solution stays where it was.  Only the component of ``b``
 perpendicular to up is used: the measured ``u_j`` are unit vectors, blind to the vertical bias.
 
@@ -32,7 +34,8 @@ class AccBiasTracker:
 
     ``prior_sigma`` (m/s^2): the bias prior around the current estimate; ``omega_sigma`` (rad/s): the
     prior of the chain's tilt drift (the gyro-bias error); ``meas_sigma`` (rad): the std of one up
-    measurement, with ``corr_frames`` neighbours it is correlated with (the window gravity's overlap).
+    measurement, with ``corr_frames`` neighbours it is correlated with (the window gravity's overlap);
+    ``walk`` (m/s^2/sqrt(s)): the bias random walk, which sets the prior of its trend (0: no trend).
     """
 
     def __init__(self, window_s: float, prior_sigma: float, omega_sigma: float = 2e-4, meas_sigma: float = 2e-3,
@@ -80,8 +83,9 @@ class AccBiasTracker:
 
     def solve(self, b_current: np.ndarray) -> tuple[np.ndarray, float] | None:
         """(bias with its horizontal part re-estimated, posterior std of that part in m/s^2), or None
-        with fewer than 10 frames.  Unknowns ``x = [w, omega, beta = b / g]``; rows
-        ``m_j = Q_j^T w + tau_j Q_j^T omega + beta``."""
+        with fewer than 10 frames.  Unknowns ``x = [w, omega, beta = b / g, beta']``; rows
+        ``m_j = Q_j^T w + tau_j Q_j^T omega + beta + tau_j beta'`` (``tau`` from the window's mid-time);
+        the bias returned is ``g (beta + beta' tau_last)``."""
         n = len(self.t)
         if n < 10:
             return None
