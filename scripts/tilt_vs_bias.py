@@ -20,6 +20,8 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
+from gevi_cli.trajectory import read_trajectory
+
 G = 9.81
 E3 = np.array([0.0, 0.0, 1.0])
 
@@ -34,13 +36,13 @@ def main() -> int:
     if gt.shape[1] < 17:
         raise SystemExit(f"{a.sequence}: the ground truth has no bias columns")
     st = pd.read_csv(a.run / "imu_states.csv")
-    tum = np.loadtxt(a.run / "traj_body.tum", ndmin=2)
+    est = read_trajectory(a.run / "traj_body.tum", frame="body")
     t_gt = gt[:, 0].astype(np.int64)
     t = st.t_ns.to_numpy(np.int64)
-    i = np.clip(np.searchsorted(t_gt, t - 500), 0, len(t_gt) - 1)  # stamps are exact to the ns in both
-    j = np.clip(np.searchsorted(np.round(tum[:, 0] * 1e9).astype(np.int64), t - 500), 0, len(tum) - 1)
+    i = np.clip(np.searchsorted(t_gt, t), 0, len(t_gt) - 1)  # stamps are exact to the ns in all three
+    j = np.clip(np.searchsorted(est.t_ns, t), 0, len(est.t_ns) - 1)
     R_gt = Rotation.from_quat(gt[i][:, [5, 6, 7, 4]]).as_matrix()
-    R_est = Rotation.from_quat(tum[j, 4:8]).as_matrix()
+    R_est = est.rotations[j]
     up_gt = np.einsum("nji,j->ni", R_gt, E3)
     err = np.einsum("nji,j->ni", R_est, E3) - up_gt
     b_true, b_est = gt[i, 14:17], st[["bax", "bay", "baz"]].to_numpy(float)

@@ -7,7 +7,8 @@ standstill cannot tell that bias from a tilt (spec 9.6), so GeVI's roll/pitch ca
 pool renders 0.2-0.3 deg of the 0.19-0.34 deg tilt error, growing as the bias random-walks.
 
 What separates them: the bias is fixed in the body, gravity in the world.  Chain the frames by the
-gyro alone (no accelerometer in the rotations), ``Q_j = R_0^T R_j``; the up direction measured in body
+gyro alone (no accelerometer in the rotations), ``Q_j = R_0^T R_j`` (``R_0`` of the history's first
+frame, kept when older frames leave the window); the up direction measured in body
 j then reads ``u_j = Q_j^T w + b / g`` with ``w`` the world up in body-0 coordinates.  When the
 vehicle yaws, ``Q_j^T w`` turns in the body while ``b / g`` does not, so both are found by linear
 least squares over a window of ``T`` seconds.  A slow gyro-bias error tilts the chained frames
@@ -74,12 +75,10 @@ class AccBiasTracker:
         self.m = np.vstack([self.m, (np.asarray(up, float) + np.asarray(b_used, float) / GRAVITY)[None]])
         old = self.t[-1] - self.t > self.window_ns
         if old.any():
+            # dropped without re-referencing the rest: the model only needs Q_j = C R_0^T R_j for one
+            # constant C (w absorbs it, and omega's isotropic prior does not see it)
             k = int(np.argmin(old))
-            # re-referenced to the new first frame (re-orthonormalised: rounding would compound)
-            U, _, Vt = np.linalg.svd(self.Q[k])
-            Rk = U @ Vt
-            self.Q = np.einsum("ji,njk->nik", Rk, self.Q[k:])
-            self.t, self.m = self.t[k:], self.m[k:]
+            self.t, self.Q, self.m = self.t[k:], self.Q[k:], self.m[k:]
 
     def solve(self, b_current: np.ndarray) -> tuple[np.ndarray, float] | None:
         """(bias with its horizontal part re-estimated, posterior std of that part in m/s^2), or None
@@ -114,10 +113,10 @@ class AccBiasTracker:
         sl = self.walk * np.sqrt(1.2 / T) / GRAVITY
         N[9:, 9:] += np.eye(3) / max(sl, 1e-12) ** 2
         try:
-            x = np.linalg.solve(N, r)
-            C = np.linalg.inv(N)
+            C = np.linalg.inv(N)  # the posterior covariance, which the std needs anyway
         except np.linalg.LinAlgError:
             return None
+        x = C @ r
         up = self.m.mean(0)
         up = up / np.linalg.norm(up)
         P = np.eye(3) - np.outer(up, up)  # the horizontal plane of the body (mean up of the window)

@@ -134,9 +134,10 @@ def test_window_drops_old_frames_and_keeps_the_chain():
     tr = AccBiasTracker(10.0, 0.05)
     _feed(tr, R)
     assert tr.span_s == pytest.approx(10.0, abs=1.0 / FRAME_HZ)
-    # after re-referencing, Q_j = R_first^T R_j still holds (the model needs exactly that)
+    # after old frames leave, the chain is still Q_j = C R_first^T R_j with one constant C (what the
+    # model needs: w takes C up), here C = R_0^T R_first, the history's first frame's
     first = len(R) - len(tr)
-    Q_true = np.einsum("ji,njk->nik", R[first], R[first:])
+    Q_true = np.einsum("ji,njk->nik", R[0], R[first:])
     assert np.abs(tr.Q - Q_true).max() < 1e-9
     b, std = tr.solve(np.zeros(3))
     # half a yaw swing in 10 s: a wider posterior, a larger pull, the same law
