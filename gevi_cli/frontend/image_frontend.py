@@ -24,6 +24,7 @@ import numpy as np
 from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.frontend.config import FrontendConfig
 from gevi_cli.estimators.lie import log_so3
+from gevi_cli.frontend.affine import PatchTemplates
 from gevi_cli.frontend.derotate import apply_homography, derotate, fit_inplane, rotation_homography
 from gevi_cli.frontend.grid import GridDetector
 from gevi_cli.frontend.klt import Pyramid, build_pyramid, in_image, track_lk
@@ -32,7 +33,7 @@ from gevi_cli.frontend.shading import remove_shading
 from gevi_cli.frontend.stereo import match_stereo
 from gevi_cli.frontend.types import FeatureObs, RectifiedStereo, StereoObs
 
-STAGES = ("rectify", "pyramid", "derotate", "lk", "detect", "stereo")
+STAGES = ("rectify", "pyramid", "derotate", "lk", "affine", "detect", "stereo")
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -63,6 +64,8 @@ class ImageFrontEnd:
         self._stereo: StereoObs | None = None  # its keyframe result, if keyframe() ran
         self._disparity_prior: float | None = None
         self._step: tuple[np.ndarray, np.ndarray] | None = None  # the last step's tracks (before, after)
+        self._templates: PatchTemplates | None = None  # the last keyframe's patches (affine re-alignment)
+        self._f32: tuple[Pyramid, np.ndarray] | None = None  # (pyramid, its image as float32)
         self.timings: dict[str, float] = dict.fromkeys(STAGES, 0.0)
 
     # -- protocol ---------------------------------------------------------------------------------
@@ -88,6 +91,8 @@ class ImageFrontEnd:
                                        self.cfg.shading_px)
             with self._timed("pyramid"):
                 self._right = build_pyramid(right, self.cfg)
+        if self.cfg.affine == "keyframe":
+            self._align()
         with self._timed("detect"):
             new = self._detect(self._left.image, self.uv)
         self._add(new)
@@ -97,6 +102,10 @@ class ImageFrontEnd:
         if ok.any():
             self._disparity_prior = float(np.median(self.uv[ok, 0] - uv_r[ok, 0]))
         self._stereo = StereoObs(_frozen(self.ids[ok]), _frozen(self.uv[ok]), _frozen(uv_r[ok]))
+        if self.cfg.affine != "none":
+            # the features with a stereo point only: they are what the pose and the BA's keyframe pairs use
+            with self._timed("affine"):
+                self._templates = PatchTemplates(self._left_f32(), self._stereo.ids, self._stereo.uv_left)
         return self._stereo
 
     def keyframe_decision(self, frame) -> None:
@@ -104,6 +113,20 @@ class ImageFrontEnd:
         return None
 
     # -- internals --------------------------------------------------------------------------------
+    def _align(self) -> None:
+        """The current tracks re-aligned to the last keyframe's patches (affine warp)."""
+        if self._templates is None or not len(self.uv):
+            return
+        with self._timed("affine"):
+            uv, _ = self._templates.align(self._left_f32(), self.ids, self.uv)
+        self.uv = _frozen(uv)
+
+    def _left_f32(self) -> np.ndarray:
+        """The current left image as float32 (what the affine re-alignment samples), made once per frame."""
+        if self._f32 is None or self._f32[0] is not self._left:
+            self._f32 = (self._left, self._left.image.astype(np.float32))
+        return self._f32[1]
+
     def _timed(self, stage: str):
         return _Timer(self.timings, stage)
 
@@ -154,6 +177,8 @@ class ImageFrontEnd:
             self._step = (self.uv[ok], uv_ok)
             self.ids, self.uv = _frozen(self.ids[ok]), uv_ok
         self._t_ns, self._left, self._right, self._stereo = t_ns, pyr, None, None
+        if self.cfg.affine == "frame":
+            self._align()
         return t_ns
 
     def _derotation(self, rotation: np.ndarray | None) -> np.ndarray | None:
