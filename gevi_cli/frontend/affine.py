@@ -182,11 +182,11 @@ class PatchTemplates:
             sel = np.flatnonzero(deform >= self.cfg.min_deform_px)
             if len(sel):
                 i0, i1 = i0[sel], i1[sel]
-                out[i1], accepted[i1] = self._align(np.asarray(img1, np.float32), i0, p1[i1], M[sel])  # (a no-op cast for float32)
+                out[i1], accepted[i1] = self._align(np.asarray(img1, np.float32), i0, p1[i1], M[sel])
         return out, accepted
 
     def _align(self, I1, k, p1, M_local):
-        cfg, offsets = self.cfg, self.offsets
+        cfg = self.cfg
         Tz, sT, gx, gy, Hinv, B = self.Tz[k], self.sT[k], self.gx[k], self.gy[k], self.Hinv[k], self.B
         n = len(k)
 
