@@ -61,14 +61,13 @@ class FrontendConfig:
     (configs/pool.yaml), wrong for a forward camera, where a turn's parallax reads as a spurious
     in-plane rotation (method.md 12.1)."""
 
-    affine: str = "none"
-    """Re-align tracks to their patch in the keyframe's image with an affine warp, where their
-    neighbourhood stretched or sheared since the keyframe (:mod:`~gevi_cli.frontend.affine`): "frame"
-    every frame, "keyframe" only the tracks that reach the next keyframe, "none" never (the default).
+    affine: bool = False
+    """Re-align every frame's tracks to their patch in the keyframe's image with an affine warp, where
+    their neighbourhood stretched or sheared since the keyframe (:mod:`~gevi_cli.frontend.affine`).
     LK's translation-only window is biased by the perspective change of slanted planes, frame after
     frame, and the epipolar BA turns those track errors into rotation (docs/method.md 10, 12.1).
-    Opt-in: "frame" cut the euroc-like renders' ATE 3.5-4.4x, but on the real kitti06_head frames its
-    ATE rose 9 % (RPE -6 %), GeVI's pool-hard renders lost 7 %, and it costs ~4 ms per frame at KITTI
+    Opt-in: it cut the euroc-like renders' ATE 3.5-4.4x, but on the real kitti06_head frames its ATE
+    rose 9 % (RPE -6 %), GeVI's pool-hard renders lost 7 %, and it costs ~4 ms per frame at KITTI
     size, the kitti-like pipeline at 2.0-2.07x the LK floor against the 2x target (method.md 12.1)."""
 
     fb_max_px: float = 0.5
@@ -98,8 +97,6 @@ class FrontendConfig:
                              f"{self.quality_percentile}, {self.shading_px}")
         if self.derotate_prior not in ("pose", "image"):
             raise ValueError(f"derotate_prior must be 'pose' or 'image', got {self.derotate_prior!r}")
-        if self.affine not in ("frame", "keyframe", "none"):
-            raise ValueError(f"affine must be 'frame', 'keyframe' or 'none', got {self.affine!r}")
         if self.derotate_min_deg < 0:
             raise ValueError(f"need derotate_min_deg >= 0, got {self.derotate_min_deg}")
         if not 0.0 < self.min_depth_m < self.max_depth_m:

@@ -91,8 +91,6 @@ class ImageFrontEnd:
                                        self.cfg.shading_px)
             with self._timed("pyramid"):
                 self._right = build_pyramid(right, self.cfg)
-        if self.cfg.affine == "keyframe":
-            self._align()
         with self._timed("detect"):
             new = self._detect(self._left.image, self.uv)
         self._add(new)
@@ -102,7 +100,7 @@ class ImageFrontEnd:
         if ok.any():
             self._disparity_prior = float(np.median(self.uv[ok, 0] - uv_r[ok, 0]))
         self._stereo = StereoObs(_frozen(self.ids[ok]), _frozen(self.uv[ok]), _frozen(uv_r[ok]))
-        if self.cfg.affine != "none":
+        if self.cfg.affine:
             # the features with a stereo point only: they are what the pose and the BA's keyframe pairs use
             with self._timed("affine"):
                 self._templates = PatchTemplates(self._left_f32(), self._stereo.ids, self._stereo.uv_left)
@@ -177,7 +175,7 @@ class ImageFrontEnd:
             self._step = (self.uv[ok], uv_ok)
             self.ids, self.uv = _frozen(self.ids[ok]), uv_ok
         self._t_ns, self._left, self._right, self._stereo = t_ns, pyr, None, None
-        if self.cfg.affine == "frame":
+        if self.cfg.affine:
             self._align()
         return t_ns
 
