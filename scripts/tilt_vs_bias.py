@@ -14,15 +14,16 @@ the mean true and estimated biases.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
+from gevi_cli.inertial.standstill import GRAVITY
 from gevi_cli.trajectory import read_trajectory
 
-G = 9.81
 E3 = np.array([0.0, 0.0, 1.0])
 
 
@@ -32,9 +33,15 @@ def main() -> int:
     ap.add_argument("sequence", type=Path)
     ap.add_argument("--window", type=float, default=12.0, help="seconds per row")
     a = ap.parse_args()
-    gt = pd.read_csv(a.sequence / "mav0" / "state_groundtruth_estimate0" / "data.csv").to_numpy(float)
+    gt_file = a.sequence / "mav0" / "state_groundtruth_estimate0" / "data.csv"
+    for f in (gt_file, a.run / "imu_states.csv", a.run / "traj_body.tum"):
+        if not f.is_file():
+            print(f"tilt_vs_bias: error: {f}: not found", file=sys.stderr)
+            return 2
+    gt = pd.read_csv(gt_file).to_numpy(float)
     if gt.shape[1] < 17:
-        raise SystemExit(f"{a.sequence}: the ground truth has no bias columns")
+        print(f"tilt_vs_bias: error: {gt_file}: the ground truth has no bias columns", file=sys.stderr)
+        return 2
     st = pd.read_csv(a.run / "imu_states.csv")
     est = read_trajectory(a.run / "traj_body.tum", frame="body")
     t_gt = gt[:, 0].astype(np.int64)
@@ -46,7 +53,7 @@ def main() -> int:
     up_gt = np.einsum("nji,j->ni", R_gt, E3)
     err = np.einsum("nji,j->ni", R_est, E3) - up_gt
     b_true, b_est = gt[i, 14:17], st[["bax", "bay", "baz"]].to_numpy(float)
-    pred = (b_true - b_est) / G
+    pred = (b_true - b_est) / GRAVITY
     pred -= np.sum(pred * up_gt, axis=1)[:, None] * up_gt  # only the part across gravity tilts
     tau = (t - t[0]) * 1e-9
     moving = (st.phase != "init").to_numpy()
