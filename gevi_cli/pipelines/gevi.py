@@ -202,6 +202,8 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
             self.pending, res.final = res.final + self.pending, []
             if res.status == OK:
                 self.init_poses.append((res.index, t_ns, res.T_w_c.copy()))
+            self.online_held.append((res.index, res.T_w_c.copy()))  # in V: written once W is known
+            res.online = []
             self._try_init(res)
         elif self.mode == GEVI and res.status == INERTIAL:
             self.tilt = tilt_of(res.T_w_c[:3, :3], self.R_ic)  # the gyro carried the attitude

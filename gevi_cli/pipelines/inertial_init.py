@@ -110,6 +110,7 @@ class InertialInitialisation:
         T_WV[:3, :3] = R_WV
         self.pending = [(i, T_WV @ T) for i, T in self.pending]
         res.T_w_c = T_WV @ res.T_w_c
+        res.online, self.online_held = [(i, T_WV @ T) for i, T in self.online_held], []
         if self.kf is not None:
             self.kf.T_w_k = T_WV @ self.kf.T_w_k
         if self.T_w_last is not None:

@@ -92,6 +92,7 @@ class KeyframeOdometry:
         self.kf: Keyframe | None = None
         self.window: list[WindowFrame] = []
         self.pending: list[tuple[int, np.ndarray]] = []  # (index, T_w_c) not final yet
+        self.online_held: list[tuple[int, np.ndarray]] = []  # online poses not written yet (FrameResult.online)
         self.index = -1
         self.sigma2 = (cfg.noise.default_px / self.camera.f) ** 2
         self.sigma2_valid = False
@@ -182,6 +183,11 @@ class KeyframeOdometry:
     def _bridge(self, t_ns: int) -> tuple[np.ndarray, str]:
         """Pose of a frame that could not be tracked: constant velocity from the last pose (``bridged``)."""
         return (self.T_w_last if self.T_w_last is not None else np.eye(4)) @ self.velocity, BRIDGED
+
+    def release_online(self) -> list[tuple[int, np.ndarray]]:
+        """Online poses still held back (the run ends before they could be re-expressed), as they are."""
+        out, self.online_held = self.online_held, []
+        return out
 
     def finish(self, closing_ba: bool = False) -> list[tuple[int, np.ndarray]]:
         """Poses still pending, made final.

@@ -34,5 +34,8 @@ class FrameResult:
     sigma_px: float = float("nan")
     message: str = ""
     final: list = field(default_factory=list)
+    # online poses to write now, (index, T_w_c), instead of this frame's T_w_c; None: this frame's.  GeVI
+    # holds the initialisation window's until the gravity-aligned world exists, so the file is one piece
+    online: list | None = None
     timings: dict = field(default_factory=dict)  # stage -> seconds
     extra: dict = field(default_factory=dict)  # pipeline-specific per-frame state (GeVI: imu_states.csv row)

@@ -91,6 +91,10 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
             for stream in finals:
                 stream.append(stamps[idx], poses[stream.frame])
 
+    def emit_online(items):
+        for idx, T_w_c in items:
+            online.append(stamps[idx], T_B_C @ T_w_c @ T_C_B)
+
     def close_lost(end_t):
         nonlocal lost_open
         if lost_open is not None:
@@ -120,7 +124,7 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
             res.timings["read"] = t_read
             total = time.perf_counter() - t0 + t_read
             stamps[res.index] = res.t_ns
-            online.append(res.t_ns, T_B_C @ res.T_w_c @ T_C_B)
+            emit_online(res.online if res.online is not None else [(res.index, res.T_w_c)])
             emit_final(res.final)
             timing.write(f"{index},{res.t_ns},{total * 1e3:.3f}," + ",".join(
                 f"{res.timings.get(s, 0.0) * 1e3:.3f}" for s in STAGES) + "\n")
@@ -150,6 +154,7 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
         if lost_open is not None:
             close_lost(max(stamps.values()) if stamps else 0)
         emit_final(odometry.finish(closing_ba=True))
+        emit_online(odometry.release_online())
         status.state = "lost-tracking" if status.lost_intervals else "ok"
         if status.lost_intervals:
             status.message = (f"tracking lost {len(status.lost_intervals)} time(s); {len(status.bridged_frames)} "
@@ -158,11 +163,13 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
             status.state, status.message = "lost-tracking", f"only {status.frames_done} frame(s) could be read"
     except KeyboardInterrupt:
         emit_final(odometry.finish())
+        emit_online(odometry.release_online())
         status.state, status.message = "interrupted", f"interrupted after {status.frames_done} frames"
         raise
     except Exception as exc:
         try:
             emit_final(odometry.finish())
+            emit_online(odometry.release_online())
         except Exception:  # the state may be what broke; what was final is already on disk
             pass
         status.state, status.message = "crashed", f"{type(exc).__name__}: {exc}"
