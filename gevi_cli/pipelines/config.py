@@ -241,13 +241,12 @@ class OdometryConfig:
         return self
 
 
-#: Per-method defaults applied over the dataclass defaults (before configs/<kind>.yaml): GeVI's first
-#: verification stage is its 3-point RANSAC.  It keeps CFO's second stage, the l1-PnP drop of the worst
-#: 10 % [gap choice: spec 2 lists no l1 stage for GeVI]: a 2D-2D RANSAC, 3- or 5-point, cannot see a wrong
-#: stereo depth, a 3D-2D test can (60 s pool renders, 3 seeds: ATE pool-easy 1.58 -> 1.41 mm, pool-hard
-#: 46.0 -> 36.7 mm; docs/method.md 9b).  It keeps the epipolar BA at keyframes, as CFO (spec 2 lists none
-#: for GeVI; measured on pool-easy_s1, 30 s: ATE 0.91 mm with it, 2.0 mm without).
+#: Per-method defaults applied over the dataclass defaults (before configs/<kind>.yaml): GeVI verifies
+#: with its 3-point RANSAC only (spec 2: no l1 stage).  CFO's l1 stage after it (``--set verify.l1=irls``)
+#: lowers pool-easy's ATE (60 s, 3 seeds: 1.60 -> 1.30 mm) but costs 1.5-1.7 ms per frame, which takes
+#: GeVI past 1.3x CFO's time on euroc_micro (docs/method.md 9b).  It keeps the epipolar BA at keyframes,
+#: as CFO (spec 2 lists none for GeVI; measured on pool-easy_s1, 30 s: ATE 0.91 mm with it, 2.0 mm without).
 METHOD_DEFAULTS = {
     "cfo": {},
-    "gevi": {"verify": {"ransac": "3pt"}},
+    "gevi": {"verify": {"ransac": "3pt", "l1": "none"}},
 }
