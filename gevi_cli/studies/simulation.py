@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gevi_cli.estimators.initialization import GRAVITY
 from gevi_cli.estimators.lie import exp_so3, project, rot_x, rot_y, rot_z, rtilt
 
 F_PX = 1100.0
@@ -142,8 +143,6 @@ def add_outliers(rng, q, ratio):
 
 # ---------------------------------------------------------------------------------------------
 # Adaptive-fusion trajectory (spec 8.3 / 11.3 "Adaptive fusion", S1 Fig. 4d) [PROPOSAL]
-
-GRAVITY = 9.81
 
 
 @dataclass
@@ -321,7 +320,7 @@ def wrap_angle_np(a):
 
 # ----------------------------------------------------------------------------- IMU (spec 9)
 #: Gravity in the z-up world frame (m/s^2).
-G_W = np.array([0.0, 0.0, -9.81])
+G_W = np.array([0.0, 0.0, -GRAVITY])
 
 
 class SinTraj:
