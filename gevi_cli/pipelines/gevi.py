@@ -436,6 +436,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         4-DOF pose first, a cheaper pose, flagged good matches there and cost 2.1 BCDs per frame on
         euroc_micro.)
         """
+        self._note_innovation()
         gate = self.cfg.pnp.chi2_gate
         s2q = self.sigma2 if self.cfg.pnp.current_noise else 0.0
         keep = np.ones(len(m.p), dtype=bool)
@@ -448,9 +449,18 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
             if np.array_equal(new, keep) or new.sum() < self.cfg.pnp.min_points:
                 break
             keep = new
-            sub = Matches(m.ids[keep], m.z[keep], m.y[keep], m.q[keep], m.p[keep], m.cov_unit[keep])
+            sub = m.subset(keep)
             cov_sub = cov[keep]
         return R, t
+
+    def _note_innovation(self) -> None:
+        """The current frame's innovation (its gravity direction against the gyro-predicted tilt) into
+        the last ``fusion.sigma_memory_s`` seconds' list, Sigma's conjugate prior.  The window residuals
+        are taken at the estimate, which an acceleration already pulled toward the specific force (they
+        understate it); the innovations do not.  Measured on pool-easy_s1 (30 s): see docs/method.md."""
+        inn = self.cur.acc_dir - est.rtilt(*self.tilt_pred).T @ np.array([0.0, 0.0, 1.0])
+        mem = int(self.cfg.fusion.sigma_memory_s * 1e9)
+        self.innovations = [x for x in self.innovations if self.cur.t_ns - x[0] < mem] + [(self.cur.t_ns, inn)]
 
     def _bcd(self, m: Matches, cov, psi, t):
         samples = self.win + [self.cur]
@@ -483,7 +493,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         front = depth > 0.5 * self.cfg.triangulation.min_depth_m
         if front.sum() < self.cfg.pnp.min_points:
             raise TrackingFailure(f"only {int(front.sum())} points in front of the camera after the 4-DOF step")
-        m = Matches(m.ids[front], m.z[front], m.y[front], m.q[front], m.p[front], m.cov_unit[front])
+        m = m.subset(front)
         cov = cov[front]
         acc = np.array([s.acc_dir for s in samples])
         rot = np.array([s.rotvec for s in samples[1:]])
@@ -501,16 +511,9 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         if fc.adaptive:
             lo += (self.cfg.init.ba_prior_sigma / GRAVITY) ** 2
         tilts0 = np.array([self.kf_tilt] + [s.tilt for s in samples[1:-1]] + [self.tilt_pred])
-        # Sigma's conjugate prior: the window residuals are taken at the estimate, which an acceleration
-        # already pulled toward the specific force (they understate it); the innovations against the
-        # gyro prediction do not.  Measured on pool-easy_s1 (30 s): see docs/method.md.
-        inn = self.cur.acc_dir - est.rtilt(*self.tilt_pred).T @ np.array([0.0, 0.0, 1.0])
-        mem = int(fc.sigma_memory_s * 1e9)
-        # (the gate's second BCD re-enters with the same frame: its innovation counts once)
-        self.innovations = [x for x in self.innovations if self.cur.t_ns - x[0] < mem and x[0] != self.cur.t_ns] \
-            + [(self.cur.t_ns, inn)]
+        # Sigma's conjugate prior: the innovations of the last sigma_memory_s (_note_innovation)
         prior, dof = None, 0.0
-        if mem > 0:
+        if int(fc.sigma_memory_s * 1e9) > 0:
             E = np.array([x[1] for x in self.innovations])
             prior, dof = E.T @ E / len(E) + lo * np.eye(3), float(len(E))
         window = est.FusionWindow(p=m.p, cov=cov, q=m.q, sigma2=self.sigma2, R_ic=self.R_ic, acc_dir=acc,

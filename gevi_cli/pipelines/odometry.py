@@ -51,6 +51,10 @@ class Matches:
     p: np.ndarray  # keyframe-left points (m)
     cov_unit: np.ndarray
 
+    def subset(self, sel) -> "Matches":
+        """The matches picked by ``sel`` (a mask or indices), every array alike."""
+        return Matches(self.ids[sel], self.z[sel], self.y[sel], self.q[sel], self.p[sel], self.cov_unit[sel])
+
 
 def _orthonormal(T: np.ndarray) -> np.ndarray:
     U, _, Vt = np.linalg.svd(T[:3, :3])
@@ -245,7 +249,7 @@ class KeyframeOdometry:
         if n_match < self.cfg.pnp.min_points:
             raise TrackingFailure(f"only {n_match} keyframe points tracked")
         keep = self.verification(m.z, m.q, m.p, self.cfg.run.seed + self.index)
-        m = Matches(m.ids[keep], m.z[keep], m.y[keep], m.q[keep], m.p[keep], m.cov_unit[keep])
+        m = m.subset(keep)
         t1 = time.perf_counter()
         timings["verify"] = t1 - t0
         if len(m.ids) < self.cfg.pnp.min_points:

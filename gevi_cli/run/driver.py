@@ -95,6 +95,11 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
         for idx, T_w_c in items:
             online.append(stamps[idx], T_B_C @ T_w_c @ T_C_B)
 
+    def flush(closing_ba: bool = False):
+        """What the odometry still holds, written: pending poses made final, held online poses."""
+        emit_final(odometry.finish(closing_ba=closing_ba))
+        emit_online(odometry.release_online())
+
     def close_lost(end_t):
         nonlocal lost_open
         if lost_open is not None:
@@ -153,8 +158,7 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
                 write_status(run_dir, status)
         if lost_open is not None:
             close_lost(max(stamps.values()) if stamps else 0)
-        emit_final(odometry.finish(closing_ba=True))
-        emit_online(odometry.release_online())
+        flush(closing_ba=True)
         status.state = "lost-tracking" if status.lost_intervals else "ok"
         if status.lost_intervals:
             status.message = (f"tracking lost {len(status.lost_intervals)} time(s); {len(status.bridged_frames)} "
@@ -162,14 +166,12 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
         elif status.frames_done < 2:
             status.state, status.message = "lost-tracking", f"only {status.frames_done} frame(s) could be read"
     except KeyboardInterrupt:
-        emit_final(odometry.finish())
-        emit_online(odometry.release_online())
+        flush()
         status.state, status.message = "interrupted", f"interrupted after {status.frames_done} frames"
         raise
     except Exception as exc:
         try:
-            emit_final(odometry.finish())
-            emit_online(odometry.release_online())
+            flush()
         except Exception:  # the state may be what broke; what was final is already on disk
             pass
         status.state, status.message = "crashed", f"{type(exc).__name__}: {exc}"
