@@ -72,6 +72,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         self.imu = imu
         T_B_C = np.asarray(self.camera.T_B_C0, dtype=float)
         self.R_ic, self.p_ic = T_B_C[:3, :3], T_B_C[:3, 3]
+        self.T_C0_B = np.linalg.inv(T_B_C)  # body -> rectified cam0 (the poses are cam0's; the IMU's are the body's)
         self.frame_period = float(frame_period_s)
         six_cfg = dataclasses.replace(cfg.verify, ransac="5pt")
         self.six_verify = FivePointL1Verification(six_cfg, self.camera)
@@ -166,18 +167,17 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
             rotvec, dt = fi.rotvec, (t_ns - t_prev_ns) * 1e-9
             if fi.gap:
                 rotvec = np.full(3, np.nan)
-        R_wb = None  # the orientation predicted from the last pose by the gyro (its tilt error is second order here)
+        s = FrameSample(index, t_ns, t_prev_ns, None, rotvec, dt, np.zeros(2), self._f_mean(t_ns))
+        # the orientation predicted from the last pose by the gyro (its tilt error is second order here)
         if self.phase != INIT and self.T_w_last is not None and np.all(np.isfinite(rotvec)):
-            R_wb = self.T_w_last[:3, :3] @ self.R_ic.T @ est.exp_so3(rotvec)
-        f = self._f_mean(t_ns)
-        acc_dir = None
-        if self.wgrav is not None and R_wb is not None and t_prev_ns is not None:
+            s.R_wb = self.T_w_last[:3, :3] @ self.R_ic.T @ s.gyro_rotation()
+        if self.wgrav is not None and s.R_wb is not None and t_prev_ns is not None:
             up = self.wgrav.up(t_prev_ns)  # the last tracked frame's, carried over by the gyro
             if up is not None:
-                acc_dir = est.exp_so3(rotvec).T @ up
-        if acc_dir is None:
-            acc_dir = self._acc_dir(t_ns, f, R_wb)
-        return FrameSample(index, t_ns, t_prev_ns, acc_dir, rotvec, dt, np.zeros(2), f, R_wb)
+                s.acc_dir = s.gyro_rotation().T @ up
+        if s.acc_dir is None:
+            s.acc_dir = self._acc_dir(t_ns, s.f_mean, s.R_wb)
+        return s
 
     # ------------------------------------------------------------------------------ main entry
     def track(self, frame):
@@ -191,7 +191,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
             self.mode = VISUAL
         else:
             self.mode = GEVI
-            self.tilt_pred = np.array(est.tilt_angles(est.rtilt(*self.tilt) @ est.exp_so3(self.cur.rotvec)))
+            self.tilt_pred = np.array(est.tilt_angles(est.rtilt(*self.tilt) @ self.cur.gyro_rotation()))
             if self.attitude is not None:
                 self.tilt_pred = self._filter_tilt(t_ns)
         res = super().track(frame)
@@ -242,10 +242,9 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         ``frontend.derotate_prior`` "image" none: the front end's in-plane fit, as for CFO."""
         if self.cfg.frontend.derotate_prior == "image":
             return None  # the front end's in-plane fit (configs/pool.yaml): pool-hard_s1 50 mm against 292 with the gyro's
-        rv = self.cur.rotvec if self.cur is not None and self.t_prev is not None else None
-        if rv is None or not np.all(np.isfinite(rv)):
+        if self.cur is None or self.t_prev is None or not np.all(np.isfinite(self.cur.rotvec)):
             return super().rotation_prior()
-        return self.R_ic.T @ est.exp_so3(rv).T @ self.R_ic
+        return self.R_ic.T @ self.cur.gyro_rotation().T @ self.R_ic
 
     def _bridge(self, t_ns: int):
         """A frame that cannot be tracked visually: at rest while the IMU shows the starting standstill,
@@ -259,7 +258,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         g, a, dts = imu_segment(self.imu.t_ns, self.imu.gyro, self.imu.acc, self.t_prev, t_ns)
         pre = integrate_increments(g, a, dts, self.b_g, self.b_a)
         T_B_C = np.asarray(self.camera.T_B_C0, dtype=float)
-        T_wb = self.T_w_last @ np.linalg.inv(T_B_C)
+        T_wb = self.T_w_last @ self.T_C0_B
         R, p, T = T_wb[:3, :3], T_wb[:3, 3], pre.dt
         g_W = np.array([0.0, 0.0, -GRAVITY])
         T_new = np.eye(4)
@@ -291,7 +290,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         """A visually tracked frame (rectified cam0 pose ``T_w_c`` in W) for the recent-motion fit and the
         window gravity; the window chains it to its last frame by the preintegrated IMU when that frame
         is stamped ``chain_from`` and the IMU covers the interval, else starts a new history."""
-        T_wb = T_w_c @ np.linalg.inv(np.asarray(self.camera.T_B_C0, dtype=float))
+        T_wb = T_w_c @ self.T_C0_B
         self.motion.add(t_ns, T_wb[:3, 3])
         w = self.wgrav
         if w is None:

@@ -7,7 +7,7 @@ accelerometer-bias estimate after a standstill start.  It reads and writes the o
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -37,6 +37,15 @@ class FrameSample:
     tilt: np.ndarray
     f_mean: np.ndarray | None = None  # mean specific force over the frame period, as measured (m/s^2)
     R_wb: np.ndarray | None = None  # body orientation the acceleration compensation used (None: none)
+    _R: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
+    _R_of: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
+
+    def gyro_rotation(self) -> np.ndarray:
+        """``exp(rotvec)``, the gyro rotation from the previous frame (body), computed once per ``rotvec``:
+        the sample, the tilt prediction, the front end's rotation prior use it in every frame."""
+        if self._R_of is not self.rotvec:
+            self._R, self._R_of = est.exp_so3(self.rotvec), self.rotvec
+        return self._R
 
 
 def tilt_of(R_wc: np.ndarray, R_ic: np.ndarray) -> np.ndarray:
