@@ -27,7 +27,7 @@ METHODS = ("gevi", "cfo")
 @click.option("--pnp", type=click.Choice(["be-w", "be", "ls", "epnp", "sqpnp"]), default=None,
               help="Pose estimator (ablations; = --set pnp.method=...).")
 @click.option("--no-ba", is_flag=True, help="No epipolar local BA (= --set ba.enabled=false).")
-@click.option("--seed", type=int, default=None, help="RANSAC seed (= --set run.seed=...).")
+@click.option("--seed", type=int, default=None, help="Seed of GeVI's 3-point RANSAC (= --set run.seed=...); OpenCV's 5-point RANSAC (CFO) has its own fixed seed.")
 @click.option("--ransac", type=click.Choice(["3pt", "5pt"]), default=None,
               help="gevi: verification RANSAC (ablation; = --set verify.ransac=...).")
 @click.option("--no-adaptive", is_flag=True, help="gevi: fixed gravity-prior weight (= --set fusion.adaptive=false).")
