@@ -72,7 +72,8 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         self.imu = imu
         T_B_C = np.asarray(self.camera.T_B_C0, dtype=float)
         self.R_ic, self.p_ic = T_B_C[:3, :3], T_B_C[:3, 3]
-        self.T_C0_B = np.linalg.inv(T_B_C)  # body -> rectified cam0 (the poses are cam0's; the IMU's are the body's)
+        # rectified cam0 -> body and back (the poses are cam0's, the IMU's are the body's)
+        self.T_B_C0, self.T_C0_B = T_B_C, np.linalg.inv(T_B_C)
         self.frame_period = float(frame_period_s)
         six_cfg = dataclasses.replace(cfg.verify, ransac="5pt")
         self.six_verify = FivePointL1Verification(six_cfg, self.camera)
@@ -257,7 +258,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
             return super()._bridge(t_ns)
         g, a, dts = imu_segment(self.imu.t_ns, self.imu.gyro, self.imu.acc, self.t_prev, t_ns)
         pre = integrate_increments(g, a, dts, self.b_g, self.b_a)
-        T_B_C = np.asarray(self.camera.T_B_C0, dtype=float)
+        T_B_C = self.T_B_C0
         T_wb = self.T_w_last @ self.T_C0_B
         R, p, T = T_wb[:3, :3], T_wb[:3, 3], pre.dt
         g_W = np.array([0.0, 0.0, -GRAVITY])
@@ -370,7 +371,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         L_k, L_c, _ = self._levelling()
         psi, t = self._pose4(m, cov, L_k, L_c)
         if self.cfg.fusion.mode == "bcd":
-            R, t = self._gated_bcd(m, cov, psi, t)
+            R, t = self._gated_bcd(m, cov, psi, t, L_k, L_c)
         else:
             R = est.rot4(psi, L_k, L_c)
             self.tilt, self.tilt_cov = self.tilt_pred.copy(), np.full((2, 2), np.nan)
@@ -423,7 +424,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
             raise TrackingFailure("4-DOF PnP failed")
         return best
 
-    def _gated_bcd(self, m: Matches, cov, psi, t):
+    def _gated_bcd(self, m: Matches, cov, psi, t, L_k, L_c):
         """The BCD on the matches whose reprojection residual its visual weights can explain.
 
         CFO's chi-square gate (``pnp.chi2_gate``, as in ``pose6._chi2_refit``):
@@ -441,7 +442,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         keep = np.ones(len(m.p), dtype=bool)
         sub, cov_sub = m, cov
         for k in range(GATE_BCDS):
-            R, t = self._bcd(sub, cov_sub, psi, t)
+            R, t = self._bcd(sub, cov_sub, psi, t, L_k, L_c)
             if gate <= 0 or k + 1 == GATE_BCDS:
                 break
             new = est.pnp6_whitened_sq(R, t, m.p, cov, m.q, s2q) <= gate
@@ -461,7 +462,8 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         mem = int(self.cfg.fusion.sigma_memory_s * 1e9)
         self.innovations = [x for x in self.innovations if self.cur.t_ns - x[0] < mem] + [(self.cur.t_ns, inn)]
 
-    def _bcd(self, m: Matches, cov, psi, t):
+    def _bcd(self, m: Matches, cov, psi, t, L_k, L_c):
+        """One BCD (spec 8) from the 4-DOF pose ``(psi, t)`` of the levelling rotations ``L_k``, ``L_c``."""
         samples = self.win + [self.cur]
         links = [s.dt for s in samples[1:]]  # seconds of gyro integration per chain link
         cap = max(self.cfg.fusion.max_window_frames, 3)
@@ -487,7 +489,6 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
             tail = samples[len(samples) - cap + 3:]
             samples = [samples[0], merged] + tail
             links = [merged.dt] + [s.dt for s in tail]
-        L_k, L_c, _ = self._levelling()
         depth = (m.p @ est.rot4(psi, L_k, L_c).T + t)[:, 2]
         front = depth > 0.5 * self.cfg.triangulation.min_depth_m
         if front.sum() < self.cfg.pnp.min_points:

@@ -342,9 +342,9 @@ def test_start_of_motion_after_the_standstill_is_not_read_as_gravity(pool_render
     used = {}  # t_ns -> (acc_dir the BCD used, standstill?) for the current frame of each BCD call
     real = GeviOdometry._bcd
 
-    def spy(self, m, cov, psi, t):
+    def spy(self, m, cov, psi, t, *levelling):
         used[int(self.cur.t_ns)] = (self.cur.acc_dir.copy(), bool(self.still))
-        return real(self, m, cov, psi, t)
+        return real(self, m, cov, psi, t, *levelling)
 
     monkeypatch.setattr(GeviOdometry, "_bcd", spy)
     execute(RunRequest(sequence=str(pool_render), method="gevi", out=str(tmp_path / "r"), quiet=True),
