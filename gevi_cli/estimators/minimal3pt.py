@@ -218,14 +218,17 @@ def ransac_iterations(w, s=3, p=0.99) -> int:
 def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_iter=1000, batch=8, first_batch=2):
     """RANSAC over the 3-point known-vertical solver, scored by Sampson distance.
 
-    ``threshold`` in normalized units ([PROPOSAL] 3 sigma_hat). Samples are drawn in batches and
-    evaluated vectorized; the adaptive stop N(3) is re-evaluated after each batch, so
+    ``threshold`` in normalized units ([PROPOSAL] 3 sigma_hat). ``seed``: an int, or a
+    ``numpy.random.Generator`` to draw from (a run passes one generator for all its frames: creating a
+    generator per call cost more than the whole 3-point solve of a clean frame). Samples are drawn in
+    batches and evaluated vectorized; the adaptive stop N(3) is re-evaluated after each batch, so
     ``iterations`` (the number of minimal samples drawn) can exceed N(3) by < ``batch``.  Batches
     grow from ``first_batch`` by doubling up to ``batch``: with few outliers N(3) is 1-2 and the
     first small batch ends the search (a batch of 8 cost 0.46 ms per frame against 0.32 ms on
     pool-easy_s1, where OpenCV's 5-point takes 0.34; study in docs/method.md section 7), while many
     outliers still get large vectorized batches.
-    Returns (psi, t_dir, inlier mask, iterations); t_dir is unit, sign fixed by cheirality.
+    Returns (psi, t_dir, inlier mask, iterations); t_dir is unit, sign fixed by cheirality; the mask
+    is the one the winning hypothesis was counted with.
     """
     z = as_points(z, 2, "z")
     q = as_points(q, 2, "q")
@@ -236,24 +239,22 @@ def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_i
     threshold = finite_scalar(threshold, "threshold")
     if threshold <= 0:
         raise DegenerateInput("threshold must be > 0")
-    rng = np.random.default_rng(seed)
-    zhT, qhT = np.empty((3, n)), np.empty((3, n))  # homogeneous points, transposed
-    zhT[:2], zhT[2] = z.T, 1.0
-    qhT[:2], qhT[2] = q.T, 1.0
-    uwT = np.empty((6, n))
-    np.matmul(L_k, zhT, out=uwT[:3])  # levelled bearings u = L_k z^h, w = L_c q^h
-    np.matmul(L_c, qhT, out=uwT[3:])
-    P = _level_points(uwT)
-    L_cT = L_c.T
-    best = (-1, np.inf, None, None)  # count, truncated cost, psi, tau
+    rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng(seed)
+    zqT = np.empty((6, n))  # homogeneous points, transposed: [z^h; q^h]
+    zqT[:2], zqT[3:5] = z.T, q.T
+    zqT[2] = zqT[5] = 1.0
+    zhT, qhT = zqT[:3], zqT[3:]
+    LL = np.zeros((6, 6))  # levelled bearings [u; w] = diag(L_k, L_c) [z^h; q^h], for the drawn points only
+    LL[:3, :3], LL[3:, 3:] = L_k, L_c
+    best = (-1, np.inf, None, None, None)  # count, truncated cost, psi, tau, inlier mask
     it = 0
     n_req = max_iter
     B_next = max(1, min(first_batch, batch))
     while it < min(n_req, max_iter):
         B = min(B_next, max_iter - it)
         B_next = min(2 * B_next, batch)
-        idx = np.argsort(rng.random((B, n)), axis=1)[:, :3] if n <= 64 else _draw3(rng, n, B)
-        _, psi, tau, Rz = _solve_core(P[idx])
+        idx = _draw3(rng, n, B)
+        _, psi, tau, Rz = _solve_core(_level_points(LL @ zqT[:, idx.ravel()]).reshape(B, 3, 11))
         it += B
         H = len(psi)
         if H == 0:
@@ -266,20 +267,20 @@ def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_i
         A = (T[:, _SKEW_T].reshape(3 * H, 3) @ L_c).reshape(H, 3, 3)
         E = np.matmul(np.swapaxes(A, 1, 2), Rz).transpose(1, 0, 2) @ L_k  # (3, H, 3) [row, h, column]
         d = _abs_sampson_t(E, zhT, qhT)  # (H, n)
-        cnt = np.add.reduce(d < threshold, axis=1, dtype=np.intp)  # = np.count_nonzero(., axis=1)
+        inl = d < threshold
+        cnt = np.add.reduce(inl, axis=1, dtype=np.intp)  # = np.count_nonzero(., axis=1)
         np.minimum(d, threshold, out=d)
         cost = np.add.reduce(np.square(d, out=d), axis=1)
         h = np.lexsort((cost, -cnt))[0]
         if cnt[h] > best[0] or (cnt[h] == best[0] and cost[h] < best[1]):
-            best = (int(cnt[h]), float(cost[h]), float(psi[h]), tau[h])
+            best = (int(cnt[h]), float(cost[h]), float(psi[h]), tau[h], inl[h])
             n_req = ransac_iterations(best[0] / n, 3, confidence)
     if best[2] is None:
         raise DegenerateInput("ransac_3pt_upright: no valid hypothesis")
-    psi, tau = best[2], best[3]
+    psi, tau, inliers = best[2], best[3], best[4]
+    L_cT = L_c.T
     t_dir = L_cT @ tau
     R = L_cT @ rot_z(psi) @ L_k
-    E = skew(t_dir) @ R  # = essential_upright(psi, t_dir, L_k, L_c)
-    inliers = _abs_sampson_t(E[:, None, :], zhT, qhT)[0] < threshold
     # cheirality: keyframe depth lambda_k = -(q x t).(q x Rz)/|q x Rz|^2 > 0 for most inliers
     Q = qhT[_P12]  # q permuted by P1 and by P2
     qR = Q * (R[_P21] @ zhT)  # with R z^h permuted by P2 and by P1
@@ -299,10 +300,12 @@ _DUP_A, _DUP_B = np.array([0, 0, 1]), np.array([1, 2, 2])
 
 
 def _draw3(rng, n, B):
-    idx = rng.integers(0, n, size=(B, 3))
-    for _ in range(100):
+    """B minimal samples of 3 distinct indices in [0, n), uniform: floor(n U) (U < 1, so < n), with the
+    samples holding a repeated index drawn again."""
+    idx = (rng.random((B, 3)) * n).astype(np.intp)
+    for _ in range(1000):
         dup = (idx[:, _DUP_A] == idx[:, _DUP_B]).any(axis=1)
         if not dup.any():
-            break
-        idx[dup] = rng.integers(0, n, size=(int(dup.sum()), 3))
-    return idx
+            return idx
+        idx[dup] = (rng.random((int(dup.sum()), 3)) * n).astype(np.intp)
+    raise DegenerateInput(f"could not draw 3 distinct indices out of {n}")

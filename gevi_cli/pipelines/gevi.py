@@ -91,6 +91,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         self.tilt_pred = np.zeros(2)
         self.tilt_cov = np.eye(2)
         self.kf_tilt, self.kf_tilt_cov = np.zeros(2), np.eye(2)
+        self.lev = (np.eye(3), np.eye(3))  # levelling of keyframe and current frame, set per GEVI-mode frame
         self.Sigma = np.full((3, 3), np.nan)
         self.win: list[FrameSample] = []
         self.cur: FrameSample | None = None
@@ -123,11 +124,12 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
 
     # --------------------------------------------------------------------------------- helpers
     def _levelling(self):
-        return (est.levelling(*self.kf_tilt, self.R_ic), est.levelling(*self.tilt_pred, self.R_ic),
-                float(np.sqrt(self.sigma2)))
+        """(L_k, L_c, sigma) of the frame being tracked (GEVI mode): the levelling rotations of the keyframe's
+        and the predicted current roll/pitch, and the current normalized noise std."""
+        return (*self.lev, float(np.sqrt(self.sigma2)))
 
-    def _verify(self, z, q, p, seed):
-        return (self.gevi_verify if self.mode == GEVI else self.six_verify)(z, q, p, seed)
+    def _verify(self, z, q, p, rng):
+        return (self.gevi_verify if self.mode == GEVI else self.six_verify)(z, q, p, rng)
 
     def _f_mean(self, t_ns: int) -> np.ndarray:
         """Mean specific force (m/s^2, body) over a frame period centred on ``t_ns`` (NaN: no samples)."""
@@ -195,6 +197,8 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
             self.tilt_pred = np.array(est.tilt_angles(est.rtilt(*self.tilt) @ self.cur.gyro_rotation()))
             if self.attitude is not None:
                 self.tilt_pred = self._filter_tilt(t_ns)
+            # the frame's levelling rotations, for its verification and its pose step
+            self.lev = (est.levelling(*self.kf_tilt, self.R_ic), est.levelling(*self.tilt_pred, self.R_ic))
         res = super().track(frame)
         if self.first_kf_index is None and res.keyframe:
             self.first_kf_index = res.index

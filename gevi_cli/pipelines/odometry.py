@@ -103,6 +103,9 @@ class KeyframeOdometry:
         self.T_w_last: np.ndarray | None = None
         self.velocity = np.eye(4)  # T_{prev,cur} of the last tracked step
         self.verification = None
+        # one generator for the run's RANSAC draws (seeding one per frame cost more than a clean frame's
+        # whole 3-point solve): a run is reproduced by its seed and its frames
+        self.rng = np.random.default_rng(cfg.run.seed)
         self._last = None  # (p, q) of the last tracked frame's verified matches
         self._tail = None  # (frame, FrameResult) of the last frame, for the closing BA of finish()
         self.obs = None  # FeatureObs of the frame being tracked
@@ -248,7 +251,7 @@ class KeyframeOdometry:
         n_match = len(m.ids)
         if n_match < self.cfg.pnp.min_points:
             raise TrackingFailure(f"only {n_match} keyframe points tracked")
-        keep = self.verification(m.z, m.q, m.p, self.cfg.run.seed + self.index)
+        keep = self.verification(m.z, m.q, m.p, self.rng)
         m = m.subset(keep)
         t1 = time.perf_counter()
         timings["verify"] = t1 - t0

@@ -4,7 +4,7 @@ CurrentFeature Odometry (spec 12.1, 5.5): (1) 5-point essential-matrix RANSAC (O
 keyframe-left and current-left, then (2) the l1-norm PnP on the survivors and the drop of the
 ``l1_drop`` fraction with the largest reprojection errors.  GeVI replaces stage (1) with its 3-point
 RANSAC with known roll/pitch (and its defaults turn (2) off, spec 2); both expose
-``__call__(z, q, p, seed) -> keep-mask``.
+``__call__(z, q, p, rng) -> keep-mask`` (``rng``: the run's ``numpy.random.Generator``).
 """
 from __future__ import annotations
 
@@ -35,12 +35,12 @@ def l1_stage(p: np.ndarray, q: np.ndarray, cfg: VerifyConfig) -> np.ndarray:
 
 
 class TwoStageVerification:
-    """Stage (1), a RANSAC the subclass provides (``ransac(z, q, seed) -> mask``), then stage (2), the l1 drop."""
+    """Stage (1), a RANSAC the subclass provides (``ransac(z, q, rng) -> mask``), then stage (2), the l1 drop."""
 
     label = "RANSAC"
 
-    def __call__(self, z: np.ndarray, q: np.ndarray, p: np.ndarray, seed: int) -> np.ndarray:
-        keep = self.ransac(z, q, seed)
+    def __call__(self, z: np.ndarray, q: np.ndarray, p: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        keep = self.ransac(z, q, rng)
         idx = np.flatnonzero(keep)
         if len(idx) < 6:
             raise TrackingFailure(f"only {len(idx)} matches survive {self.label}")
@@ -57,7 +57,7 @@ class FivePointL1Verification(TwoStageVerification):
         self.cfg = cfg
         self.camera = camera
 
-    def ransac(self, z: np.ndarray, q: np.ndarray, seed: int) -> np.ndarray:
+    def ransac(self, z: np.ndarray, q: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         cfg = self.cfg
         n = len(z)
         if cfg.ransac == "none" or n < 5:
@@ -66,9 +66,9 @@ class FivePointL1Verification(TwoStageVerification):
         if parallax_px < cfg.min_parallax_px:
             # No translation to speak of: every E = [t]x R fits, so RANSAC cannot classify.
             return np.ones(n, dtype=bool)
-        # (findEssentialMat's RANSAC draws from a generator of its own with a fixed seed: its result does
-        # not change with cv2.setRNGSeed, measured with OpenCV 5.1, so CFO's runs do not depend on --seed)
-        cv2.setRNGSeed(int(seed))
+        # (findEssentialMat's RANSAC draws from a generator of its own with a fixed seed, not from ``rng``: its
+        # result does not change with cv2.setRNGSeed either, measured with OpenCV 5.1, so CFO's runs do not
+        # depend on --seed)
         E, mask = cv2.findEssentialMat(z.reshape(-1, 1, 2), q.reshape(-1, 1, 2), np.eye(3), method=cv2.RANSAC,
                                        prob=cfg.ransac_prob, threshold=cfg.ransac_threshold_px / self.camera.f)
         if E is None or mask is None:
@@ -94,7 +94,7 @@ class ThreePointVerification(TwoStageVerification):
         self.levelling = levelling
         self.iterations = 0  # minimal samples drawn in the last call (for the --ransac ablation)
 
-    def ransac(self, z: np.ndarray, q: np.ndarray, seed: int) -> np.ndarray:
+    def ransac(self, z: np.ndarray, q: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         cfg, n = self.cfg, len(z)
         if n < 3:
             return np.ones(n, dtype=bool)
@@ -104,7 +104,7 @@ class ThreePointVerification(TwoStageVerification):
         L_k, L_c, sigma = self.levelling()
         thr = max(cfg.threshold_sigmas * sigma, cfg.ransac_threshold_px / self.camera.f)
         try:
-            _, _, inliers, it = est.ransac_3pt_upright(z, q, L_k, L_c, thr, seed=int(seed),
+            _, _, inliers, it = est.ransac_3pt_upright(z, q, L_k, L_c, thr, seed=rng,
                                                        confidence=cfg.ransac_prob)
         except est.EstimatorError as err:
             raise TrackingFailure(f"3-point RANSAC: {err}") from None
