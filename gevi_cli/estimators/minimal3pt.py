@@ -246,7 +246,7 @@ def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_i
     zhT, qhT = zqT[:3], zqT[3:]
     LL = np.zeros((6, 6))  # levelled bearings [u; w] = diag(L_k, L_c) [z^h; q^h], for the drawn points only
     LL[:3, :3], LL[3:, 3:] = L_k, L_c
-    best = (-1, np.inf, None, None, None)  # count, truncated cost, psi, tau, inlier mask
+    best = (-1, np.inf, None, None, None, None)  # count, truncated cost, psi, tau, inlier mask, Rz(psi)
     it = 0
     n_req = max_iter
     B_next = max(1, min(first_batch, batch))
@@ -273,14 +273,14 @@ def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_i
         cost = np.add.reduce(np.square(d, out=d), axis=1)
         h = np.lexsort((cost, -cnt))[0]
         if cnt[h] > best[0] or (cnt[h] == best[0] and cost[h] < best[1]):
-            best = (int(cnt[h]), float(cost[h]), float(psi[h]), tau[h], inl[h])
+            best = (int(cnt[h]), float(cost[h]), float(psi[h]), tau[h], inl[h], Rz[h])
             n_req = ransac_iterations(best[0] / n, 3, confidence)
     if best[2] is None:
         raise DegenerateInput("ransac_3pt_upright: no valid hypothesis")
     psi, tau, inliers = best[2], best[3], best[4]
     L_cT = L_c.T
     t_dir = L_cT @ tau
-    R = L_cT @ rot_z(psi) @ L_k
+    R = L_cT @ best[5] @ L_k
     # cheirality: keyframe depth lambda_k = -(q x t).(q x Rz)/|q x Rz|^2 > 0 for most inliers
     Q = qhT[_P12]  # q permuted by P1 and by P2
     qR = Q * (R[_P21] @ zhT)  # with R z^h permuted by P2 and by P1
@@ -291,7 +291,7 @@ def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_i
     s = qR[0] + qR[1]
     s += qR[2]  # = -lambda_k |q x Rz|^2
     s = s[inliers]
-    if np.count_nonzero(s < 0) < np.count_nonzero(s > 0):
+    if np.add.reduce(np.sign(s)) > 0:  # more negative depths than positive ones
         t_dir = -t_dir
     return psi, t_dir, inliers, it
 

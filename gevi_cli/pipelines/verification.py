@@ -49,6 +49,20 @@ class TwoStageVerification:
         out[idx[sub]] = True
         return out
 
+    def parallax_px(self, z: np.ndarray, q: np.ndarray) -> float:
+        """Median keyframe -> current displacement of the matches (px): np.median's value (the mean of the two
+        middle values for an even count) from a partial sort, a ninth of its cost at a few hundred matches."""
+        d = q - z
+        d *= d
+        r = np.sqrt(d[:, 0] + d[:, 1])  # = np.linalg.norm(q - z, axis=1)
+        m = len(r) // 2
+        if len(r) % 2:
+            med = np.partition(r, m)[m]
+        else:
+            lo_hi = np.partition(r, (m - 1, m))[m - 1:m + 1]
+            med = np.add.reduce(lo_hi) / 2.0
+        return med * self.camera.f
+
 
 class FivePointL1Verification(TwoStageVerification):
     """CFO's two-stage verification (5-point RANSAC, then l1-PnP drop)."""
@@ -62,8 +76,7 @@ class FivePointL1Verification(TwoStageVerification):
         n = len(z)
         if cfg.ransac == "none" or n < 5:
             return np.ones(n, dtype=bool)
-        parallax_px = np.median(np.linalg.norm(q - z, axis=1)) * self.camera.f
-        if parallax_px < cfg.min_parallax_px:
+        if self.parallax_px(z, q) < cfg.min_parallax_px:
             # No translation to speak of: every E = [t]x R fits, so RANSAC cannot classify.
             return np.ones(n, dtype=bool)
         # (findEssentialMat's RANSAC draws from a generator of its own with a fixed seed, not from ``rng``: its
@@ -98,8 +111,7 @@ class ThreePointVerification(TwoStageVerification):
         cfg, n = self.cfg, len(z)
         if n < 3:
             return np.ones(n, dtype=bool)
-        parallax_px = np.median(np.linalg.norm(q - z, axis=1)) * self.camera.f
-        if parallax_px < cfg.min_parallax_px:
+        if self.parallax_px(z, q) < cfg.min_parallax_px:
             return np.ones(n, dtype=bool)  # as for 5-point: no translation, the model cannot classify
         L_k, L_c, sigma = self.levelling()
         thr = max(cfg.threshold_sigmas * sigma, cfg.ransac_threshold_px / self.camera.f)
