@@ -219,8 +219,8 @@ def ransac_3pt_upright(z, q, L_k, L_c, threshold, seed=0, confidence=0.99, max_i
     """RANSAC over the 3-point known-vertical solver, scored by Sampson distance.
 
     ``threshold`` in normalized units ([PROPOSAL] 3 sigma_hat). ``seed``: an int, or a
-    ``numpy.random.Generator`` to draw from (a run passes one generator for all its frames: creating a
-    generator per call cost more than the whole 3-point solve of a clean frame). Samples are drawn in
+    ``numpy.random.Generator`` to draw from (a run passes one generator re-positioned per frame: creating
+    a generator per call cost more than the whole 3-point solve of a clean frame). Samples are drawn in
     batches and evaluated vectorized; the adaptive stop N(3) is re-evaluated after each batch, so
     ``iterations`` (the number of minimal samples drawn) can exceed N(3) by < ``batch``.  Batches
     grow from ``first_batch`` by doubling up to ``batch``: with few outliers N(3) is 1-2 and the

@@ -190,7 +190,7 @@ def test_sampson_at_the_epipole():
 
 
 def test_generator_or_seed_and_distinct_draws():
-    # an int seed and a generator made from it draw the same samples; a run passes one generator on
+    # an int seed and a generator made from it draw the same samples (a run passes its per-frame generator)
     z, q, L_k, L_c, thr, seed = next(_problems())
     a = ransac_3pt_upright(z, q, L_k, L_c, thr, seed=seed)
     b = ransac_3pt_upright(z, q, L_k, L_c, thr, seed=np.random.default_rng(seed))
