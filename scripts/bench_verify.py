@@ -9,7 +9,8 @@ the pipeline's confidence and threshold (5-point: the same Sampson threshold, Op
 ``findEssentialMat``).  Prints the median time per frame, the iterations and the inlier agreement.  ``--outliers 0.3``
 replaces 30 % of the current points by random ones (S1's outlier study) on the same inputs.
 ``--in-pipeline`` times the call where the run makes it instead (the images have just gone through
-the caches: the 3-point's many small numpy calls pay more for that than OpenCV's one call).
+the caches: the 3-point's many small numpy calls pay more for that than OpenCV's one call), and the
+run's whole verification stage (``verify_ms`` of ``timing.csv``: matching, RANSAC, parallax, l1 drop).
 """
 from __future__ import annotations
 
@@ -51,6 +52,8 @@ def record(seq: Path, frames: int):
 def in_pipeline(seq: Path, frames: int, repeat: int) -> None:
     """Time the RANSAC call inside the run, as the pipeline meets it (after the front end's image work), for
     ``gevi run --method gevi`` and ``--ransac 5pt``, runs interleaved; prints the mean ms per call."""
+    import pandas as pd
+
     from gevi_cli import estimators as est
     from gevi_cli.run.session import RunRequest, execute
 
@@ -65,6 +68,7 @@ def in_pipeline(seq: Path, frames: int, repeat: int) -> None:
         return call
 
     res = {"3pt": [], "5pt": []}
+    stage = {"3pt": [], "5pt": []}  # the run's whole verify stage (timing.csv: matching, RANSAC, l1 drop)
     for _ in range(repeat):
         for ransac in res:
             acc = []
@@ -76,15 +80,17 @@ def in_pipeline(seq: Path, frames: int, repeat: int) -> None:
                 with tempfile.TemporaryDirectory() as d:
                     execute(RunRequest(sequence=str(seq), method="gevi", ransac=ransac, max_frames=frames, out=d,
                                        quiet=True), echo=lambda *a, **k: None)
+                    stage[ransac].append(pd.read_csv(Path(d) / "timing.csv")["verify_ms"].mean())
             finally:
                 est.ransac_3pt_upright, cv2.findEssentialMat = real3, real5
             res[ransac].append(1e3 * np.mean(acc))
     print(f"inside the pipeline ({frames} frames of {seq.name}, {repeat} runs each, interleaved; mean ms per call "
           f"of each run; load {os.getloadavg()[0]:.2f}):")
-    print("| RANSAC | runs | median |")
-    print("|---|---|---|")
+    print("| RANSAC | call, runs | call, median | verify stage per frame, runs | stage, median |")
+    print("|---|---|---|---|---|")
     for ransac, label in (("3pt", "3-point upright (gevi)"), ("5pt", "5-point OpenCV (--ransac 5pt)")):
-        print(f"| {label} | {' '.join(f'{x:.3f}' for x in res[ransac])} | {np.median(res[ransac]):.3f} |")
+        print(f"| {label} | {' '.join(f'{x:.3f}' for x in res[ransac])} | {np.median(res[ransac]):.3f} | "
+              f"{' '.join(f'{x:.3f}' for x in stage[ransac])} | {np.median(stage[ransac]):.3f} |")
 
 
 def _generator(state):
