@@ -154,8 +154,10 @@ def _markdown(cfg, specs, baselines, res, se3, posyaw, runtime, skipped, pngs, r
     rules = ("Every comparison across methods: SE(3) alignment over all poses, body frame, RPE over consecutive "
              f"frames (delta {cfg.eval.rpe_delta:g} frame); estimates covering less than "
              f"{100 * cfg.eval.min_coverage:g} % of the ground-truth time span are `failed`. Trials: mean ± std and "
-             "median (min, max); trial k runs with RANSAC seed k. **Bold** best, _italic_ second. `failed`: the run "
-             "broke (crashed, no trajectory, or too little coverage); `n/a`: never run; `[k/N lost tracking]`: k of "
+             "median (min, max); trial k runs with `--seed k` (GeVI's 3-point RANSAC; CFO's 5-point RANSAC, "
+             "OpenCV's, keeps a seed of its own, so its trials differ only by a `seed_per_trial` render). **Bold** "
+             "best, _italic_ second. `failed`: the run broke (crashed, no trajectory, or too little coverage); "
+             "`n/a`: never run; `[k/N lost tracking]`: k of "
              "the N trials lost tracking and bridged the frames they could not track (constant velocity; the IMU "
              "for gevi), so their numbers are not those of a run that tracked throughout.")
     import sys

@@ -194,8 +194,9 @@ class RunConfig:
     """Run-level settings."""
 
     seed: int = opt(0, "seed of GeVI's 3-point RANSAC, per frame: frame k draws from (seed, k) whatever earlier "
-                               "frames drew (determinism: the same seed, sequence, start and config give the same run). OpenCV's 5-point RANSAC "
-                               "(CFO, --ransac 5pt) has a fixed seed of its own: it does not change with this")
+                       "frames drew (determinism: the same seed, sequence, start and config give the same run). "
+                       "OpenCV's 5-point RANSAC (CFO, --ransac 5pt) has a fixed seed of its own: it does not "
+                       "change with this")
     align: str = opt("se3", "alignment of the run's evaluation (se3 for stereo)")
     rpe_delta: float = opt(1.0, "RPE delta in frames")
 

@@ -4,7 +4,7 @@ CurrentFeature Odometry (spec 12.1, 5.5): (1) 5-point essential-matrix RANSAC (O
 keyframe-left and current-left, then (2) the l1-norm PnP on the survivors and the drop of the
 ``l1_drop`` fraction with the largest reprojection errors.  GeVI replaces stage (1) with its 3-point
 RANSAC with known roll/pitch (and its defaults turn (2) off, spec 2); both expose
-``__call__(z, q, p, rng) -> keep-mask`` (``rng``: the run's ``numpy.random.Generator``).
+``__call__(z, q, p, rng) -> keep-mask`` (``rng``: the frame's ``numpy.random.Generator``, seeded per frame).
 """
 from __future__ import annotations
 

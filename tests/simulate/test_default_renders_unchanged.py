@@ -1,6 +1,7 @@
 """The simulator options added for GeVI (--a-max, --moving-start) leave the default renders exactly as
 they were: the ground truth of the two renders ORB-SLAM3 was run on (../shared/data/sim_baselines)
-is reproduced byte for byte, and the options do change the motion when set."""
+is reproduced byte for byte (to the last rounding where the CPU's floating-point kernels differ from
+the ones that wrote it), and the options do change the motion when set."""
 from __future__ import annotations
 
 import numpy as np
@@ -17,7 +18,26 @@ def test_groundtruth_of_the_baseline_renders_is_byte_identical(preset, tmp_path)
     shipped = shared_path("sim_baselines", f"{preset}_s1", "groundtruth.csv")
     seq = build_sequence(SimulationConfig(preset, seed=1, duration_s=30.0))
     write_groundtruth_csv(seq, tmp_path / "gt.csv")
-    assert (tmp_path / "gt.csv").read_bytes() == shipped.read_bytes()
+    got, want = (tmp_path / "gt.csv").read_bytes(), shipped.read_bytes()
+    if got == want:
+        return
+    # Not byte-identical: numpy's float64 transcendental functions dispatch on the CPU's SIMD extensions
+    # (AVX-512 kernels against libm), which round differently in the last bit for rare arguments, so the
+    # shipped bytes are reproducible only on a CPU like the one that wrote them (measured on an AVX2-only
+    # CPU: 5 and 6 of 6001 rows differ, values at most 2.8e-17 apart, with the simulator unchanged). The
+    # render must still be the same computation: the same rows and stamps, every value within a few
+    # rounding errors (8 eps of its column's scale), and the rows that differ rare. A change of the
+    # motion (an option left on, a new random draw) moves every row by orders of magnitude more.
+    rows_got, rows_want = got.decode().splitlines(), want.decode().splitlines()
+    assert rows_got[0] == rows_want[0] and len(rows_got) == len(rows_want)
+    cells_got = [r.split(",") for r in rows_got[1:]]
+    cells_want = [r.split(",") for r in rows_want[1:]]
+    assert [c[0] for c in cells_got] == [c[0] for c in cells_want]  # stamps (ns), exact
+    a = np.array([c[1:] for c in cells_got], dtype=float)
+    b = np.array([c[1:] for c in cells_want], dtype=float)
+    scale = np.maximum(np.abs(b).max(axis=0), 1.0)
+    assert np.all(np.abs(a - b) <= 8 * np.finfo(float).eps * scale)
+    assert sum(x != y for x, y in zip(rows_got, rows_want)) <= 0.01 * len(rows_want)
 
 
 def test_peak_acceleration_and_moving_start_options():
