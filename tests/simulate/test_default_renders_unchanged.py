@@ -21,9 +21,9 @@ def test_groundtruth_of_the_baseline_renders_is_byte_identical(preset, tmp_path)
     got, want = (tmp_path / "gt.csv").read_bytes(), shipped.read_bytes()
     if got == want:
         return
-    # Not byte-identical: numpy's float64 transcendental functions dispatch on the CPU's SIMD extensions
-    # (AVX-512 kernels against libm), which round differently in the last bit for rare arguments, so the
-    # shipped bytes are reproducible only on a CPU like the one that wrote them (measured on an AVX2-only
+    # Not byte-identical: the float64 kernels numpy and its BLAS pick for the CPU (SIMD dispatch; this
+    # machine has no AVX-512) may round differently in the last bit for rare arguments, so the shipped
+    # bytes are reproducible only on a CPU like the one that wrote them (measured on an AVX2-only
     # CPU: 5 and 6 of 6001 rows differ, values at most 2.8e-17 apart, with the simulator unchanged). The
     # render must still be the same computation: the same rows and stamps, every value within a few
     # rounding errors (8 eps of its column's scale), and the rows that differ rare. A change of the
