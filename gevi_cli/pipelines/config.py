@@ -247,8 +247,9 @@ class OdometryConfig:
 
 #: Per-method defaults applied over the dataclass defaults (before configs/<kind>.yaml): GeVI verifies
 #: with its 3-point RANSAC only (spec 2: no l1 stage).  CFO's l1 stage after it (``--set verify.l1=irls``)
-#: lowers pool-easy's ATE (60 s, 3 seeds: 1.60 -> 1.30 mm) by when keyframes are taken, not by the points it
-#: drops, and costs 1.5-1.7 ms per frame: GeVI at 1.29-1.34x CFO's time on euroc_micro (docs/method.md 9b).  It keeps the epipolar BA at keyframes,
+#: lowers pool-easy's ATE (60 s, 3 seeds: 1.63 -> 1.31 mm at 522e2ed, CFO 1.24) by when keyframes are taken,
+#: not by the points it drops, raises pool-hard's (34.4 -> 37.6 mm), and costs 1.5-2.7 ms per frame: GeVI at
+#: 1.3-1.4x CFO's time on euroc_micro (docs/method.md 9b).  It keeps the epipolar BA at keyframes,
 #: as CFO (spec 2 lists none for GeVI; measured on pool-easy_s1, 30 s: ATE 0.91 mm with it, 2.0 mm without).
 METHOD_DEFAULTS = {
     "cfo": {},
