@@ -104,6 +104,8 @@ class BAConfig:
 
     enabled: bool = opt(True, "run the BA at each keyframe insertion")
     kernel: str = opt("truncated", "'truncated' (the authors' choice) or 'huber' (delta = 3 sigma in both), 'none'")
+    delta_sigmas: float = opt(3.0, "kernel threshold delta = this x the noise std sigma_hat (tighter helps the renders, "
+                                   "hurts the real sequences: docs/method.md 10)")
     max_iter: int = opt(10, "LM iterations")
     tol: float = opt(1e-4, "stop when the relative step or the relative robust-cost decrease is below this")
     max_reproj_ratio: float = opt(1.5, "reject a BA whose new-keyframe pose reprojects the keyframe points with a "

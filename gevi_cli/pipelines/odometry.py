@@ -325,6 +325,7 @@ class KeyframeOdometry:
         self._ba_longest = max(self._ba_longest, len(frames))
         try:
             r = est.epipolar_local_ba(window, est.BAOptions(kernel=self.cfg.ba.kernel, max_iter=self.cfg.ba.max_iter,
+                                                           delta=self.cfg.ba.delta_sigmas * window.sigma,
                                                            tol=self.cfg.ba.tol, max_gap=self.cfg.ba.max_gap))
         except est.EstimatorError:
             return None
