@@ -103,7 +103,7 @@ class BAConfig:
     """Epipolar local BA over the last two keyframes and the frames between (spec 10)."""
 
     enabled: bool = opt(True, "run the BA at each keyframe insertion")
-    kernel: str = opt("truncated", "'truncated' (the authors' choice) or 'huber' (delta = 3 sigma in both), 'none'")
+    kernel: str = opt("truncated", "'truncated' (the authors' choice) or 'huber' (the same delta in both), 'none'")
     delta_sigmas: float = opt(3.0, "kernel threshold delta = this x the noise std sigma_hat (tighter helps the renders, "
                                    "hurts the real sequences: docs/method.md 10)")
     max_iter: int = opt(10, "LM iterations")
@@ -242,6 +242,8 @@ class OdometryConfig:
             raise GeviError(f"{where}: pnp.step_tol", f"must be >= 0, got {self.pnp.step_tol}")
         if not self.pnp.max_refine_steps >= 1:
             raise GeviError(f"{where}: pnp.max_refine_steps", f"must be >= 1, got {self.pnp.max_refine_steps}")
+        if not self.ba.delta_sigmas > 0:
+            raise GeviError(f"{where}: ba.delta_sigmas", f"must be > 0, got {self.ba.delta_sigmas}")
         if not self.pnp.reverify_sigmas > 0:
             raise GeviError(f"{where}: pnp.reverify_sigmas", f"must be > 0, got {self.pnp.reverify_sigmas}")
         return self

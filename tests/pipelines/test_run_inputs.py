@@ -34,6 +34,7 @@ def test_set_and_shortcuts_override_in_order(capsys):
     (["--set", "frontend.shading_px=-1"], "--set: frontend", "shading_px >= 0"),
     (["--set", "frontend.quality_percentile=0"], "--set: frontend", "quality_percentile <= 100"),
     (["--set", "frontend.cell_px=0"], "--set: frontend", "invalid front-end config"),
+    (["--set", "ba.delta_sigmas=0"], "ba.delta_sigmas", "must be > 0"),
 ])
 def test_bad_set_is_one_line(args, where, what, capsys):
     code, _, err = run_cli(["run", "--dump-config"] + args, capsys)
