@@ -9,6 +9,7 @@ Then ``python scripts/gevi_sweep.py sims60/pool-easy_s1 ... -o sweep_gevi`` runs
 ``gevi run`` (one process each, as a user would), and prints a Markdown table per sequence and the
 means per preset: ATE / RPE (SE(3), body frame, RPE over one frame), roll/pitch RMSE over the run
 and over its first and last 10 s after the initialisation (gravity-direction angle, no alignment),
+its trend (least-squares slope of the 5 s windows' RMSE after the initialisation, deg/min),
 frames/s and the mean verification time per frame.
 """
 from __future__ import annotations
@@ -32,7 +33,7 @@ VARIANTS = {
 }
 
 
-def tilt_windows(run: Path, seq: Path) -> tuple[float, float, float]:
+def tilt_windows(run: Path, seq: Path) -> tuple[float, float, float, float]:
     from gevi_cli.datasets import open_sequence
     from gevi_cli.evaluation.tilt import tilt_errors
     from gevi_cli.trajectory import read_trajectory
@@ -43,7 +44,7 @@ def tilt_windows(run: Path, seq: Path) -> tuple[float, float, float]:
     t_init = te.t_ns[0] + int(status.get("imu", {}).get("initialisation", {}).get("at_s", 0.0) * 1e9)
     first = te.window_rmse_deg(t_init, t_init + 10_000_000_000)
     last = te.window_rmse_deg(te.t_ns[-1] - 10_000_000_000, te.t_ns[-1])
-    return te.rmse_deg, first, last
+    return te.rmse_deg, first, last, te.trend_deg_per_min(t_init)
 
 
 def run_one(seq: Path, variant: str, out: Path) -> dict:
@@ -60,9 +61,10 @@ def run_one(seq: Path, variant: str, out: Path) -> dict:
            "fps": st["frames_done"] / st["elapsed_s"], "verify_ms": timing["verify_ms"].mean()}
     if st.get("method", variant.split()[0]) == "cfo":
         # CFO's world is its first camera, not gravity-aligned: a tilt against the truth means nothing
-        row["tilt_deg"] = row["tilt_first10_deg"] = row["tilt_last10_deg"] = np.nan
+        row["tilt_deg"] = row["tilt_first10_deg"] = row["tilt_last10_deg"] = row["tilt_trend_deg_min"] = np.nan
     else:
-        row["tilt_deg"], row["tilt_first10_deg"], row["tilt_last10_deg"] = tilt_windows(run, seq)
+        row["tilt_deg"], row["tilt_first10_deg"], row["tilt_last10_deg"], row["tilt_trend_deg_min"] = \
+            tilt_windows(run, seq)
     return row
 
 
@@ -89,7 +91,8 @@ def main() -> int:
             a.out.mkdir(parents=True, exist_ok=True)
             pd.DataFrame(rows).to_csv(a.out / "sweep.csv", index=False)  # after every run: a killed sweep keeps its rows
             print(f"{r['sequence']:16s} {v:20s} ATE {r['ATE_mm']:8.3f} mm RPE {r['RPE_mm']:7.3f} mm tilt "
-                  f"{r['tilt_deg']:.3f} deg ({r['tilt_first10_deg']:.3f} -> {r['tilt_last10_deg']:.3f}) "
+                  f"{r['tilt_deg']:.3f} deg ({r['tilt_first10_deg']:.3f} -> {r['tilt_last10_deg']:.3f}, trend "
+                  f"{r['tilt_trend_deg_min']:+.3f} deg/min) "
                   f"{r['fps']:.1f} fps verify {r['verify_ms']:.2f} ms {r['tracked']} (inertial {r['inertial']})",
                   flush=True)
     df = pd.DataFrame(rows)
@@ -97,7 +100,8 @@ def main() -> int:
     df.to_csv(a.out / "sweep.csv", index=False)
     df["preset"] = df.sequence.str.replace(r"_s\d+$", "", regex=True)
     means = df.groupby(["preset", "variant"], sort=False)[["ATE_mm", "RPE_mm", "tilt_deg", "tilt_first10_deg",
-                                                            "tilt_last10_deg", "fps", "verify_ms"]].mean()
+                                                            "tilt_last10_deg", "tilt_trend_deg_min", "fps",
+                                                            "verify_ms"]].mean()
     text = "## per run\n\n" + markdown(df.drop(columns="preset"))
     text += "\n\n## mean over seeds\n\n" + markdown(means.reset_index()) + "\n"
     (a.out / "sweep.md").write_text(text)

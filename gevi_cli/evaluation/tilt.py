@@ -38,6 +38,29 @@ class TiltErrors:
         m = (self.t_ns >= t0_ns) & (self.t_ns <= t1_ns)
         return float(np.sqrt(np.mean(self.err_deg[m] ** 2))) if m.any() else float("nan")
 
+    def trend_deg_per_min(self, t0_ns: int, window_s: float = 5.0) -> float:
+        """Slope (deg per minute) of the tilt error's RMSE over consecutive ``window_s`` windows from ``t0_ns``
+        on, by least squares: whether roll/pitch drift over the run (> 0) or settle (< 0).  Every window
+        counts, where a first-against-last comparison reads two windows of an error that fluctuates by
+        about its own size.  The windows' errors are correlated in time (an accelerometer bias walks), so
+        the spread of this slope over runs, not a per-run residual, is its uncertainty.  NaN with fewer
+        than three windows."""
+        step = int(round(window_s * 1e9))
+        if step <= 0:
+            raise ValueError("window_s must be > 0")
+        k = (self.t_ns - t0_ns) // step
+        m = self.t_ns >= t0_ns
+        t, rms = [], []
+        for j in np.unique(k[m]):
+            sel = m & (k == j)
+            if self.t_ns[sel][-1] - self.t_ns[sel][0] < 0.5 * step:
+                continue  # a window cut short by the end of the run
+            t.append((j + 0.5) * window_s / 60.0)
+            rms.append(np.sqrt(np.mean(self.err_deg[sel] ** 2)))
+        if len(t) < 3:
+            return float("nan")
+        return float(np.polyfit(np.asarray(t), np.asarray(rms), 1)[0])
+
 
 def gravity_angle_deg(R_est: np.ndarray, R_ref: np.ndarray) -> np.ndarray:
     """Angle (deg) between R_est^T e3 and R_ref^T e3 for (n, 3, 3) arrays."""
