@@ -55,7 +55,7 @@ class TiltErrors:
             sel = m & (k == j)
             if self.t_ns[sel][-1] - self.t_ns[sel][0] < 0.5 * step:
                 continue  # a window cut short by the end of the run
-            t.append((j + 0.5) * window_s / 60.0)
+            t.append((np.mean(self.t_ns[sel]) - t0_ns) / 60e9)  # its samples' mean time (a last window is short)
             rms.append(np.sqrt(np.mean(self.err_deg[sel] ** 2)))
         if len(t) < 3:
             return float("nan")

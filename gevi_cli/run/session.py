@@ -355,8 +355,13 @@ def _evaluate_tilt(run_dir: Path, gt, status, echo) -> None:
         return
     status.evaluation["tilt_rmse_deg"] = te.rmse_deg
     status.evaluation["tilt_max_deg"] = float(te.err_deg.max())
-    echo(f"roll/pitch error {te.rmse_deg:.3f} deg RMSE, {te.err_deg.max():.3f} deg max (gravity direction, "
-         "no alignment; needs a gravity-aligned ground truth)")
+    # whether roll/pitch drift: the slope over every 5 s window after the initialisation (None: too short a run)
+    at_s = ((status.imu or {}).get("initialisation") or {}).get("at_s") or 0.0
+    trend = te.trend_deg_per_min(int(te.t_ns[0]) + int(round(at_s * 1e9)))
+    status.evaluation["tilt_trend_deg_per_min"] = trend if np.isfinite(trend) else None
+    trend_txt = f", trend {trend:+.3f} deg/min over 5 s windows" if np.isfinite(trend) else ""
+    echo(f"roll/pitch error {te.rmse_deg:.3f} deg RMSE, {te.err_deg.max():.3f} deg max{trend_txt} (gravity "
+         "direction, no alignment; needs a gravity-aligned ground truth)")
 
 
 def _evaluate_one(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status, align: str, out: Path, echo) -> dict:
