@@ -38,7 +38,7 @@ class ImuReport:
     noise_stated: dict
     flags: list = field(default_factory=list)
     attitude: object = None  # AttitudeTrack of the adaptive filter
-    comparison: list = field(default_factory=list)  # (name, (tilt RMSE, roll/pitch RMSE) deg, note) against GT
+    comparison: list = field(default_factory=list)  # (name, (tilt RMSE, roll/pitch RMSE deg, tilt trend deg/min), note)
 
 
 def _standstills(stream: ImuStream) -> list[tuple[int, int]]:
@@ -119,7 +119,7 @@ def _compare(rep: ImuReport, stream: ImuStream, gt, R0, b_g, cfg) -> list:
 
     def rmse(t_ns, R, max_diff):
         te = tilt_errors(_traj(t_ns, R), gt, max_diff_s=max_diff)
-        return te.rmse_deg, te.roll_pitch_rmse_deg
+        return te.rmse_deg, te.roll_pitch_rmse_deg, te.trend_deg_per_min(int(te.t_ns[0]))
 
     half = 0.51 / cfg.update_hz  # every ground-truth stamp finds a filter output
     rows = [("adaptive gravity filter (gevi imu)", rmse(rep.attitude.t_ns, rep.attitude.R_WI, half),

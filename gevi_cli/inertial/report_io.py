@@ -74,11 +74,13 @@ def summary_lines(rep, stream) -> list[str]:
         lines.append(f"flag: {f}")
     if rep.comparison:
         lines.append("")
-        lines.append("| roll/pitch against ground truth | tilt RMSE [deg] | roll, pitch RMSE [deg] | note |")
-        lines.append("|---|---|---|---|")
-        lines += [f"| {n} | {v[0]:.3f} | {v[1]:.3f} | {note} |" for n, v, note in rep.comparison]
+        lines.append("| roll/pitch against ground truth | tilt RMSE [deg] | roll, pitch RMSE [deg] | tilt trend [deg/min] "
+                     "| note |")
+        lines.append("|---|---|---|---|---|")
+        lines += [f"| {n} | {v[0]:.3f} | {v[1]:.3f} | {v[2]:+.3f} | {note} |" for n, v, note in rep.comparison]
         lines.append("(tilt = angle between estimated and true gravity direction in the body frame; roll, pitch = RMS "
-                     "of both Euler-angle differences, amplified near pitch +-90 deg; no alignment)")
+                     "of both Euler-angle differences, amplified near pitch +-90 deg; trend = least-squares slope of "
+                     "the tilt RMSE over 5 s windows; no alignment)")
     return lines
 
 

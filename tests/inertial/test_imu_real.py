@@ -52,6 +52,12 @@ def test_gevi_imu_report_over_the_whole_stream(tmp_path, capsys):
     assert ours <= 1.2
     assert ours < rows["gyro-only integration"] and ours < rows["complementary filter, fixed gain"]
     assert ours < rows["same filter, fixed gravity weight"]
+    # the trend column: gyro-only integration drifts (the standstill bias's ~1e-3 rad/s error integrates,
+    # about 3 deg/min at most), the gravity-anchored filter does not (a tenth of gyro-only's lower bound)
+    trend = {line.split("|")[1].strip(): float(line.split("|")[4]) for line in out.splitlines()
+             if line.startswith("| ") and "RMSE" not in line}
+    assert trend["gyro-only integration"] > 1.0
+    assert abs(trend["adaptive gravity filter (gevi imu)"]) < 0.1
     assert "starting standstill" in out and "white noise at rest" in out and "200.0 Hz" in out
     att = (tmp_path / "imu" / "attitude.tum").read_text().splitlines()
     assert len(att) > 7000 and all(float(x) == 0.0 for x in att[-1].split()[1:4])
