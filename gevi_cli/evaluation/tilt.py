@@ -48,18 +48,18 @@ class TiltErrors:
         step = int(round(window_s * 1e9))
         if step <= 0:
             raise ValueError("window_s must be > 0")
-        k = (self.t_ns - t0_ns) // step
-        m = self.t_ns >= t0_ns
-        t, rms = [], []
-        for j in np.unique(k[m]):
-            sel = m & (k == j)
-            if self.t_ns[sel][-1] - self.t_ns[sel][0] < 0.5 * step:
-                continue  # a window cut short by the end of the run
-            t.append((np.mean(self.t_ns[sel]) - t0_ns) / 60e9)  # its samples' mean time (a last window is short)
-            rms.append(np.sqrt(np.mean(self.err_deg[sel] ** 2)))
-        if len(t) < 3:
+        m = self.t_ns >= t0_ns  # stamps are increasing: each window is one run of samples
+        dt = (self.t_ns[m] - t0_ns).astype(np.float64)
+        if len(dt) == 0:
             return float("nan")
-        return float(np.polyfit(np.asarray(t), np.asarray(rms), 1)[0])
+        _, start, count = np.unique((self.t_ns[m] - t0_ns) // step, return_index=True, return_counts=True)
+        span = dt[start + count - 1] - dt[start]
+        t = np.add.reduceat(dt, start) / count / 60e9  # each window's mean time (a last window is short)
+        rms = np.sqrt(np.add.reduceat(self.err_deg[m] ** 2, start) / count)
+        full = span >= 0.5 * step  # a window cut short by the end of the run counts from half its length
+        if full.sum() < 3:
+            return float("nan")
+        return float(np.polyfit(t[full], rms[full], 1)[0])
 
 
 def gravity_angle_deg(R_est: np.ndarray, R_ref: np.ndarray) -> np.ndarray:
