@@ -49,10 +49,11 @@ class TiltErrors:
         if step <= 0:
             raise ValueError("window_s must be > 0")
         m = self.t_ns >= t0_ns  # stamps are increasing: each window is one run of samples
-        dt = (self.t_ns[m] - t0_ns).astype(np.float64)
-        if len(dt) == 0:
+        d_ns = self.t_ns[m] - t0_ns
+        if len(d_ns) == 0:
             return float("nan")
-        _, start, count = np.unique((self.t_ns[m] - t0_ns) // step, return_index=True, return_counts=True)
+        _, start, count = np.unique(d_ns // step, return_index=True, return_counts=True)
+        dt = d_ns.astype(np.float64)
         span = dt[start + count - 1] - dt[start]
         t = np.add.reduceat(dt, start) / count / 60e9  # each window's mean time (a last window is short)
         rms = np.sqrt(np.add.reduceat(self.err_deg[m] ** 2, start) / count)

@@ -117,19 +117,19 @@ def _compare(rep: ImuReport, stream: ImuStream, gt, R0, b_g, cfg) -> list:
 
     t, g, a = stream.t_ns, stream.gyro, stream.acc
 
-    def rmse(t_ns, R, max_diff):
+    def tilt_stats(t_ns, R, max_diff):  # (tilt RMSE, roll/pitch RMSE, trend)
         te = tilt_errors(_traj(t_ns, R), gt, max_diff_s=max_diff)
         return te.rmse_deg, te.roll_pitch_rmse_deg, te.trend_deg_per_min(int(te.t_ns[0]))
 
     half = 0.51 / cfg.update_hz  # every ground-truth stamp finds a filter output
-    rows = [("adaptive gravity filter (gevi imu)", rmse(rep.attitude.t_ns, rep.attitude.R_WI, half),
+    rows = [("adaptive gravity filter (gevi imu)", tilt_stats(rep.attitude.t_ns, rep.attitude.R_WI, half),
              "online gyro bias, adaptive gravity-prior covariance")]
     fixed = GravityAttitudeFilter(R0, b_g, stream.noise, stream.dt_nominal,
                                   AttitudeFilterConfig(**{**cfg.__dict__, "adaptive": False}))
     trk = run_filter(fixed, t, g, a)
-    rows.append(("same filter, fixed gravity weight", rmse(trk.t_ns, trk.R_WI, half), "Sigma = noise floor"))
-    rows.append(("gyro-only integration", rmse(t, gyro_only(R0, b_g, t, g), 0.003), "standstill gyro bias"))
-    best = min(((k, rmse(t, complementary(R0, b_g, t, g, a, k), 0.003)) for k in COMPLEMENTARY_GAINS),
+    rows.append(("same filter, fixed gravity weight", tilt_stats(trk.t_ns, trk.R_WI, half), "Sigma = noise floor"))
+    rows.append(("gyro-only integration", tilt_stats(t, gyro_only(R0, b_g, t, g), 0.003), "standstill gyro bias"))
+    best = min(((k, tilt_stats(t, complementary(R0, b_g, t, g, a, k), 0.003)) for k in COMPLEMENTARY_GAINS),
                key=lambda x: x[1][0])
     rows.append(("complementary filter, fixed gain", best[1], f"best of gains {COMPLEMENTARY_GAINS}: {best[0]:g}"))
     return rows
