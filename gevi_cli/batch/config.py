@@ -17,12 +17,12 @@ from gevi_cli.errors import GeviError
 
 TOP_KEYS = {"name", "root", "trials", "output", "cache", "methods", "sequences", "baselines", "eval"}
 SEQ_KEYS = {"name", "path", "simulate", "gt", "calib", "imu_calib", "kind", "cameras", "topics", "start", "max_frames",
-            "methods", "optional", "seed_per_trial"}
+            "stride", "methods", "optional", "seed_per_trial"}
 SIM_KEYS = {"preset", "seed", "duration", "rate", "resolution", "baseline", "format", "imu_rate", "gyro_noise",
             "gyro_walk", "acc_noise", "acc_walk", "no_imu_noise", "distortion", "image_noise", "supersample", "a_max",
             "moving_start"}
 METHOD_KEYS = {"name", "run", "trials"}
-BASELINE_KEYS = {"name", "path", "file", "format", "frame", "T_B_C0", "optional", "sequences"}
+BASELINE_KEYS = {"name", "path", "file", "format", "frame", "T_B_C0", "stamps", "optional", "sequences"}
 EVAL_KEYS = {"rpe_delta", "min_coverage", "max_diff", "plots"}
 #: `gevi run` options a method entry may use (the rest belong to the batch: sequence, seed, output)
 METHOD_OPTIONS = {"--method", "--pnp", "--no-ba", "--ransac", "--no-adaptive", "--no-fusion", "--set",
@@ -61,11 +61,13 @@ class RunInputs:
     topics: str | None = None
     start: int = 0
     max_frames: int | None = None
+    stride: int = 1  # every stride-th frame (`gevi run --stride`)
 
     def request_kwargs(self) -> dict:
         """As :class:`~gevi_cli.run.session.RunRequest` fields."""
         return {"groundtruth": self.gt, "calib": self.calib, "imu_calib": self.imu_calib, "kind": self.kind,
-                "cameras": self.cameras, "topics": self.topics, "start": self.start, "max_frames": self.max_frames}
+                "cameras": self.cameras, "topics": self.topics, "start": self.start, "max_frames": self.max_frames,
+                "stride": self.stride}
 
 
 @dataclass(frozen=True)
@@ -105,20 +107,25 @@ class MethodEntry:
 
 @dataclass(frozen=True)
 class BaselineEntry:
-    """Trajectories of another system: ``path`` template with ``{sequence}``; frame and extrinsic.
+    """Trajectories of another system: ``path`` template with ``{sequence}`` (or ``{stride}``, the
+    sequence's ``stride:``, with ``sequences:``); frame and extrinsic.
 
+    ``files``: one trajectory per run of the system (several: its trials, one table cell).
     ``T_B_C0``: ``sequence`` (the sequence's calibration), ``identity``, a file (text/YAML, as
-    ``gevi eval --T-B-C0``) or a 4x4 list.  A sequence whose folder is absent is ``n/a``; a folder
-    without ``file`` means the system ran and wrote nothing (``failed``).
+    ``gevi eval --T-B-C0``) or a 4x4 list.  ``stamps``: ``sequence`` stamps KITTI rows (no times) with
+    the times of the frames the runs are given (after ``start``, ``stride``, ``max_frames``), one row
+    per frame.  A sequence whose folder is absent is ``n/a``; a folder without the file means the
+    system ran and wrote nothing (``failed``).
     """
 
     name: str
     line: int
     path: str
-    file: str | None
+    files: tuple  # file names inside the folder (empty: ``path`` is the file)
     fmt: str | None
     frame: str
     T_B_C0: object
+    stamps: str | None = None  # None (the file's own) or "sequence"
     sequences: tuple | None = None
     optional: bool = False
     skip_reason: str = ""
@@ -429,7 +436,8 @@ def _sequences(ctx, node, cfg: BatchConfig) -> list:
                 kind=ctx.scalar(s, "kind", where, str), cameras=ctx.scalar(s, "cameras", where, str),
                 topics=ctx.scalar(s, "topics", where, str),
                 start=ctx.scalar(s, "start", where, int, 0, lambda v: None if v >= 0 else "must not be negative"),
-                max_frames=ctx.scalar(s, "max_frames", where, int, None, _positive)),
+                max_frames=ctx.scalar(s, "max_frames", where, int, None, _positive),
+                stride=ctx.scalar(s, "stride", where, int, 1, lambda v: None if v >= 1 else "must be at least 1")),
             methods=methods, optional=optional,
             seed_per_trial=ctx.scalar(s, "seed_per_trial", where, bool, False), skip_reason=skip))
         if out[-1].seed_per_trial and sim is None:
@@ -447,9 +455,10 @@ def _baselines(ctx, node, cfg: BatchConfig) -> list:
         name = _entry_name(ctx, b, item, "baselines")
         where = f"baselines.{name}"
         path = ctx.scalar(b, "path", where, str)
-        if not path or "{sequence}" not in path:
+        if not path or not ("{sequence}" in path or ("{stride}" in path and "sequences" in b)):
             raise ctx.err(b["path"][1] if "path" in b else item, f"{where}.path",
-                          "expected a path template holding {sequence}, e.g. DIR/{sequence}/orbslam3_stereo")
+                          "expected a path template holding {sequence}, e.g. DIR/{sequence}/orbslam3_stereo "
+                          "({stride} with a sequences: list)")
         fmt = ctx.scalar(b, "format", where, str, None,
                          lambda v: None if v in FORMATS else f"unknown format; choose one of {', '.join(FORMATS)}")
         if fmt is None:
@@ -484,14 +493,33 @@ def _baselines(ctx, node, cfg: BatchConfig) -> list:
             what = "expected a list of names from sequences:"
             seqs = _known_names(ctx, b["sequences"][1], f"{where}.sequences", seq_names, what, lambda _: what)
         optional = ctx.scalar(b, "optional", where, bool, False)
+        stamps = ctx.scalar(b, "stamps", where, str, None,
+                            lambda v: None if v == "sequence" else "must be sequence (or absent: the file's own)")
+        if stamps and fmt != "kitti":
+            raise ctx.err(b["stamps"][1], f"{where}.stamps", "only for format: kitti (rows without times)")
         template = path
-        root_part = cfg.resolve(template.split("{sequence}")[0] or ".")
+        prefix = template.split("{")[0]  # the folder holding the first placeholder
+        root_part = cfg.resolve(prefix if not prefix or prefix.endswith("/") else str(Path(prefix).parent))
         skip = ""
         if not root_part.exists():
             if not optional:
                 raise ctx.err(b["path"][1], f"{where}.path", f"{root_part}: no such folder")
             skip = f"{root_part} is absent"
         out.append(BaselineEntry(name=name, line=item.start_mark.line + 1, path=template,
-                                 file=ctx.scalar(b, "file", where, str), fmt=fmt, frame=frame, T_B_C0=T,
+                                 files=_files(ctx, b, where), fmt=fmt, frame=frame, T_B_C0=T, stamps=stamps,
                                  sequences=seqs, optional=optional, skip_reason=skip))
     return out
+
+
+def _files(ctx, b: dict, where: str) -> tuple:
+    """``file:`` as a tuple of names: one, or a list (one per run of the system)."""
+    if "file" not in b:
+        return ()
+    node = b["file"][1]
+    value = _value(node)
+    names = [value] if isinstance(value, str) else value
+    if not isinstance(names, list) or not names or not all(isinstance(x, str) and x for x in names):
+        raise ctx.err(node, f"{where}.file", "expected a file name or a non-empty list of them (one per run)")
+    if len(set(names)) != len(names):
+        raise ctx.err(node, f"{where}.file", "lists a file twice")
+    return tuple(names)

@@ -79,7 +79,7 @@ def evaluate_batch(specs, baselines, settings, inertial_methods: set) -> BatchRe
     from gevi_cli.evaluation.evaluate import evaluate_pair, failed
     from gevi_cli.evaluation.inputs import run_primary
     from gevi_cli.run.folder import read_status
-    from gevi_cli.trajectory import read_trajectory
+    from gevi_cli.trajectory import Trajectory, read_trajectory
 
     load = _gt_loader()
     out = BatchResults()
@@ -130,15 +130,18 @@ def evaluate_batch(specs, baselines, settings, inertial_methods: set) -> BatchRe
             continue  # no result: the cell reads n/a
         if b.state == "failed" or b.sequence not in seq_gt_path:
             if b.state == "failed":
-                out.se3.append(failed(b.name, b.sequence, "", None, b.reason))
+                out.se3.append(failed(b.name, b.sequence, b.trial, None, b.reason))
             continue
         try:
             gt, T_seq, raw = load(seq_gt_path[b.sequence])
             T = _T(b.T_B_C0, T_seq)
             est = read_trajectory(b.path, name=b.name, frame=b.frame)
+            if b.stamps_ns is not None:  # KITTI rows, one per frame the runs were given: their times
+                est = Trajectory(np.asarray(b.stamps_ns, dtype=np.int64), est.positions, est.quat_wxyz,
+                                 frame=b.frame, name=b.name, meta=est.meta)
             r = evaluate_pair(gt, est, dataclasses.replace(settings, est_frame=b.frame), "se3", method=b.name,
-                              sequence=b.sequence, trial="", T_B_C0=T, gt_raw=raw)
+                              sequence=b.sequence, trial=b.trial, T_B_C0=T, gt_raw=raw)
         except GeviError as exc:
-            r = failed(b.name, b.sequence, "", b.path, exc.one_line())
+            r = failed(b.name, b.sequence, b.trial, b.path, exc.one_line())
         out.se3.append(r)
     return out

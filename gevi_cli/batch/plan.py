@@ -93,42 +93,66 @@ class BaselineRun:
     frame: str
     T_B_C0: object
     fmt: str
+    trial: str = ""  # "run<k>" when the baseline lists several files (runs) per sequence
+    stamps_ns: tuple | None = None  # int ns per row (``stamps: sequence``), else the file's own stamps
+
+
+def sequence_stamps(seq: SequenceEntry) -> tuple:
+    """The stamps (int ns) of the frames every run of the dataset sequence ``seq`` is given."""
+    from gevi_cli.run.session import RunRequest, frame_range, open_input
+
+    req = RunRequest(sequence=seq.path, **seq.inputs.request_kwargs())
+    source, _ = open_input(req)
+    start, stop = frame_range(req, len(source))
+    return tuple(int(t) for t in source.stamps_ns[start:stop])
 
 
 def baseline_runs(cfg: BatchConfig) -> list[BaselineRun]:
-    """Resolve the baseline templates per sequence and read every file once (an unreadable one is a
-    config error, exit 2, before any run)."""
+    """Resolve the baseline templates per sequence and read every file once (an unreadable one, or one
+    whose rows do not match the sequence's frames under ``stamps: sequence``, is a config error, exit 2,
+    before any run)."""
     from gevi_cli.trajectory import read_trajectory
 
     out = []
     for b in cfg.baselines:
         if b.skip_reason:
             continue
+        where = f"{cfg.path}:{b.line}"
         for seq in cfg.sequences:
             if seq.skip_reason or (b.sequences is not None and seq.name not in b.sequences):
                 continue
-            d = cfg.resolve(b.path.format(sequence=seq.name))
+            d = cfg.resolve(b.path.format(sequence=seq.name, stride=seq.inputs.stride))
             common = {"name": b.name, "ident": b.ident, "sequence": seq.name, "frame": b.frame, "T_B_C0": b.T_B_C0,
                       "fmt": b.fmt}
             if not d.exists():
                 out.append(BaselineRun(path=None, state="n/a", reason=f"{d} is absent", **common))
                 continue
-            f = d / b.file if b.file and d.is_dir() else d
-            if d.is_dir() and not b.file:
-                raise GeviError(f"{cfg.path}:{b.line}", f"baselines.{b.name}: {d} is a folder; name the trajectory "
-                                                        "inside it with file:")
-            if not f.is_file():
-                out.append(BaselineRun(path=None, state="failed", reason=f"no trajectory written ({f.name} absent)",
-                                       **common))
-                continue
-            try:
-                found = read_trajectory(f).meta["format"]  # every row is validated here, once
-            except GeviError as exc:
-                raise GeviError(f"{cfg.path}:{b.line}", f"baselines.{b.name}: unreadable: {exc.one_line()}") from None
-            except OSError as exc:
-                raise GeviError(f"{cfg.path}:{b.line}", f"baselines.{b.name}: {f}: {exc.strerror}") from None
-            if found != b.fmt:
-                raise GeviError(f"{cfg.path}:{b.line}", f"baselines.{b.name}: {f} reads as {found}, the config "
-                                                        f"declares format: {b.fmt}")
-            out.append(BaselineRun(path=str(f), state="ok", reason="", **common))
+            if d.is_dir() and not b.files:
+                raise GeviError(where, f"baselines.{b.name}: {d} is a folder; name the trajectory inside it with file:")
+            stamps = None
+            if b.stamps == "sequence":
+                if seq.path is None:
+                    raise GeviError(where, f"baselines.{b.name}: stamps: sequence needs a dataset (path:) sequence, "
+                                           f"not the render {seq.name}")
+                stamps = sequence_stamps(seq)
+            files = [d / f for f in b.files] if d.is_dir() else [d]
+            for k, f in enumerate(files, start=1):
+                trial = f"run{k}" if len(files) > 1 else ""
+                if not f.is_file():
+                    out.append(BaselineRun(path=None, state="failed", reason=f"no trajectory written ({f.name} absent)",
+                                           trial=trial, **common))
+                    continue
+                try:
+                    traj = read_trajectory(f)  # every row is validated here, once
+                except GeviError as exc:
+                    raise GeviError(where, f"baselines.{b.name}: unreadable: {exc.one_line()}") from None
+                except OSError as exc:
+                    raise GeviError(where, f"baselines.{b.name}: {f}: {exc.strerror}") from None
+                if traj.meta["format"] != b.fmt:
+                    raise GeviError(where, f"baselines.{b.name}: {f} reads as {traj.meta['format']}, the config "
+                                           f"declares format: {b.fmt}")
+                if stamps is not None and len(traj) != len(stamps):
+                    raise GeviError(where, f"baselines.{b.name}: {f} has {len(traj)} rows but {seq.name} gives its "
+                                           f"runs {len(stamps)} frames (stamps: sequence needs one row per frame)")
+                out.append(BaselineRun(path=str(f), state="ok", reason="", trial=trial, stamps_ns=stamps, **common))
     return out

@@ -93,7 +93,8 @@ def write_batch_report(report_dir: Path, cfg, specs, baselines, res, settings, *
     seq_info = {s: {"poses": len(g), "span_s": g.duration_s, "path_length_m": g.path_length_m}
                 for s, g in res.gts.items()}
     inputs = {"config": str(cfg.path), "runs": {s.run_id: s.run_dir for s in specs},
-              "baselines": {f"{b.name}/{b.sequence}": b.path for b in baselines}}
+              "baselines": {f"{b.name}/{b.sequence}" + (f"/{b.trial}" if b.trial else ""): b.path
+                            for b in baselines}}
     write_report(report_dir, tables, res.se3 + res.posyaw, seq_info, settings, inputs)
     plots = []
     if cfg.eval.plots:
@@ -109,7 +110,8 @@ def write_batch_report(report_dir: Path, cfg, specs, baselines, res, settings, *
     pngs = [p for p in plots if p.suffix == ".png"]
     results_doc = {"batch": cfg.name, "config": str(cfg.path), "gevi_version": __version__,
                    "runs": _clean(res.runs), "skipped": skipped,
-                   "baselines": [{"name": b.name, "sequence": b.sequence, "state": b.state, "reason": b.reason}
+                   "baselines": [{"name": b.name, "sequence": b.sequence, "trial": b.trial, "state": b.state,
+                                  "reason": b.reason}
                                  for b in baselines],
                    "cells": _cells(se3)}
     (report_dir / "results.json").write_text(json.dumps(results_doc, indent=1) + "\n")
@@ -175,6 +177,7 @@ def _markdown(cfg, specs, baselines, res, se3, posyaw, runtime, skipped, pngs, r
                 src += " (seed = trial)"
         else:
             src = f"`{_short(s.path, cfg.root)}`" + (f", max_frames {s.inputs.max_frames}" if s.inputs.max_frames else "")
+        src += f", stride {s.inputs.stride}" if s.inputs.stride > 1 else ""
         note = f" — skipped: {s.skip_reason}" if s.skip_reason else ""
         L.append(f"| {s.name} | {src}{note} | {', '.join(s.methods) if s.methods else 'all'} |")
     if cfg.baselines:
@@ -182,7 +185,9 @@ def _markdown(cfg, specs, baselines, res, se3, posyaw, runtime, skipped, pngs, r
         for b in cfg.baselines:
             T = b.T_B_C0 if isinstance(b.T_B_C0, str) else "4x4 in the config"
             T = _short(T, cfg.root) if isinstance(T, str) and "/" in T else T
-            L.append(f"| {b.name} | `{_short(b.path, cfg.root)}`{'/' + b.file if b.file else ''}"
+            files = "/" + (b.files[0] if len(b.files) == 1 else "{" + ",".join(b.files) + "}") if b.files else ""
+            stamps = " (stamped with the sequence's frame times)" if b.stamps else ""
+            L.append(f"| {b.name} | `{_short(b.path, cfg.root)}{files}`{stamps}"
                      f"{' — skipped: ' + b.skip_reason if b.skip_reason else ''} | {b.fmt} | {b.frame} | {T} |")
     if skipped:
         L += ["", "Skipped sequences: " + "; ".join(f"{d['sequence']} ({d['reason']})" for d in skipped) + "."]

@@ -21,6 +21,9 @@ METHODS = ("gevi", "cfo")
                    "Default: gevi when the sequence has an IMU, else cfo.")
 @click.option("--start", type=click.IntRange(min=0), default=0, help="First frame (index).")
 @click.option("--max-frames", type=click.IntRange(min=1), default=None, help="Number of frames to run.")
+@click.option("--stride", type=click.IntRange(min=1), default=1, show_default=True, metavar="K",
+              help="Use every K-th frame (frame j = original frame K*j, its stamp kept; --start and --max-frames "
+                   "count strided frames); the IMU and the ground truth stay whole. Not for track exports.")
 @click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
               help="YAML overriding the defaults (after configs/<kind>.yaml).")
 @click.option("--set", "sets", multiple=True, metavar="STAGE.KEY=VALUE", help="Override one key (repeatable).")
@@ -43,7 +46,7 @@ METHODS = ("gevi", "cfo")
 @click.option("--dump-config", is_flag=True, help="Print every --set key with its effective value and exit.")
 @click.option("-q", "--quiet", is_flag=True, help="No progress bar; only the result lines.")
 @add_sequence_options
-def command(sequence, method, start, max_frames, config_file, sets, pnp, no_ba, seed, ransac, no_adaptive, no_fusion,
+def command(sequence, method, start, max_frames, stride, config_file, sets, pnp, no_ba, seed, ransac, no_adaptive, no_fusion,
             imu_time_offset, out, results_root, plots, dump_config, quiet, kind, groundtruth, calib, imu_calib, topics,
             cameras):
     """Run odometry on SEQUENCE and evaluate it against its ground truth.
@@ -60,10 +63,12 @@ def command(sequence, method, start, max_frames, config_file, sets, pnp, no_ba, 
       gevi run ../shared/data/euroc_micro --gt ../shared/data/euroc_micro/groundtruth/V1_01_easy.csv
       gevi run EXPORT/ov2slam_data_kitti_04_gray --calib EXPORT/../calib/gray_calib.txt --gt 04.txt
       gevi run SEQ --pnp epnp --no-ba --set keyframe.max_mean_disp_px=20
+      gevi run ../shared/data/kitti06_head/dataset/sequences/06 --stride 3   # every 3rd frame
     """
     from gevi_cli.run.session import RunRequest, execute
 
-    req = RunRequest(sequence=sequence, method=method, start=start, max_frames=max_frames, config_file=config_file,
+    req = RunRequest(sequence=sequence, method=method, start=start, max_frames=max_frames, stride=stride,
+                     config_file=config_file,
                      sets=tuple(sets), pnp=pnp, no_ba=no_ba, seed=seed, out=out, results_root=results_root,
                      plots=plots, quiet=quiet, kind=kind, groundtruth=groundtruth, calib=calib, imu_calib=imu_calib,
                      topics=topics, cameras=cameras, ransac=ransac, no_adaptive=no_adaptive, no_fusion=no_fusion,

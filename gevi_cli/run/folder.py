@@ -1,6 +1,7 @@
 """The run folder: the unit ``gevi eval``, ``gevi batch`` and ``gevi regress`` read.
 
-Layout (``results/<method>/<sequence>/<timestamp>/`` by default, ``latest`` links the newest)::
+Layout (``results/<method>/<sequence>/<timestamp>/`` by default, ``latest`` links the newest; a
+``--stride K`` run's sequence is ``<sequence>_strideK``, its frame indices count strided frames)::
 
     status.json            state (running / ok / lost-tracking / interrupted / crashed), the primary
                            trajectory file and its frame, lost intervals, bridged frames, version, command
@@ -64,6 +65,7 @@ class RunStatus:
     state: str = "running"
     method: str = ""
     sequence: str = ""
+    stride: int = 1  # `gevi run --stride`: frame j of the run is frame stride * j of the sequence
     primary: str = PRIMARY
     frame: str = "body"
     frames_total: int = 0

@@ -34,6 +34,7 @@ class RunRequest:
     method: str | None = None  # None: gevi when the sequence has an IMU, else cfo
     start: int = 0
     max_frames: int | None = None
+    stride: int = 1  # every stride-th frame (start and max_frames count strided frames); IMU and GT whole
     config_file: str | None = None
     sets: tuple = ()
     pnp: str | None = None
@@ -64,15 +65,20 @@ def _is_export(path: Path) -> bool:
 def open_input(req: RunRequest):
     """(source, kind) for the request: an image Sequence or a TrackExport."""
     from gevi_cli.commands.options import sequence_kwargs
+    from gevi_cli.datasets.strided import StridedSequence, check_stride
 
     if req.sequence is None:
         raise GeviError("gevi run", "give a SEQUENCE (dataset folder, bag or track export)")
+    check_stride(req.stride)
     path = Path(req.sequence)
     if not path.exists():
         raise GeviError(path, "no such file or folder")
     if req.kind in (None, "ov2slam-tracks") and _is_export(path):
         from gevi_cli.datasets.track_export import open_track_export
 
+        if req.stride > 1:
+            raise GeviError("--stride", f"{path} is a track export: its tracks were made at the full frame rate by "
+                                        "the exporter's front end, so they cannot be strided; stride the images")
         if req.groundtruth is not None and not Path(req.groundtruth).is_file():
             raise GeviError("--gt", f"{req.groundtruth}: no such file")
         return open_track_export(path, req.calib, groundtruth=req.groundtruth), "ov2slam-tracks"
@@ -80,7 +86,19 @@ def open_input(req: RunRequest):
 
     seq = open_sequence(path, kind=req.kind, **sequence_kwargs(req.groundtruth, req.calib, req.topics, req.cameras,
                                                              req.imu_calib))
-    return seq, seq.kind
+    return (StridedSequence(seq, req.stride) if req.stride > 1 else seq), seq.kind
+
+
+def frame_range(req: RunRequest, n: int) -> tuple[int, int]:
+    """(start, stop) indices of the frames a run of ``req`` tracks, out of the ``n`` (strided) frames."""
+    if n < 2:
+        raise GeviError(req.sequence, f"holds {n} frame(s); odometry needs at least two")
+    if req.start >= n:
+        raise GeviError("--start", f"{req.start} is past the last frame ({n - 1})")
+    stop = n if req.max_frames is None else min(n, req.start + req.max_frames)
+    if stop - req.start < 2:
+        raise GeviError("--max-frames", "odometry needs at least two frames")
+    return req.start, stop
 
 
 def choose_method(req: RunRequest, source) -> tuple[str, str]:
@@ -248,14 +266,7 @@ def execute(req: RunRequest, echo=print) -> int:
     method, why = choose_method(req, source)
     req = dataclasses.replace(req, method=method)
     cfg, sources = resolve_config(req, kind, method)
-    n = len(source)
-    if n < 2:
-        raise GeviError(req.sequence, f"holds {n} frame(s); odometry needs at least two")
-    if req.start >= n:
-        raise GeviError("--start", f"{req.start} is past the last frame ({n - 1})")
-    stop = n if req.max_frames is None else min(n, req.start + req.max_frames)
-    if stop - req.start < 2:
-        raise GeviError("--max-frames", "odometry needs at least two frames")
+    stop = frame_range(req, len(source))[1]
     for w in getattr(source, "warnings", []):
         echo(f"gevi: warning: {w}", err=True)
     def warn(msg):
@@ -269,16 +280,18 @@ def execute(req: RunRequest, echo=print) -> int:
     run_dir = make_run_dir(req.out, Path(req.results_root), req.method, seq_name)
     sensor = "stereo-inertial" if method == "gevi" else "stereo"
     config_doc = {"method": req.method, "sequence": str(req.sequence), "kind": kind, "sensor": sensor,
-                  "align": cfg.run.align, "frames": [req.start, stop], "sources": sources,
+                  "align": cfg.run.align, "stride": req.stride, "frames": [req.start, stop], "sources": sources,
                   **dataclasses.asdict(cfg)}
     (run_dir / "config.yaml").write_text(yaml.safe_dump(config_doc, sort_keys=False))
     kitti_rows = kind in ("kitti", "ov2slam-tracks")
     # KITTI ground truth without stamps is matched by frame index: then the KITTI rows are primary
     gt_traj = getattr(source, "groundtruth", None)
     indexed_gt = kitti_rows and gt_traj is not None and gt_traj.indexed
-    status = RunStatus(method=req.method, primary=PRIMARY_KITTI if indexed_gt else PRIMARY, sequence=seq_name, gevi_version=__version__,
+    status = RunStatus(method=req.method, stride=req.stride, primary=PRIMARY_KITTI if indexed_gt else PRIMARY, sequence=seq_name, gevi_version=__version__,
                        command=" ".join(["gevi"] + sys.argv[1:]), started=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
-    echo(f"gevi run: {req.method} on {seq_name} ({kind}), frames {req.start}..{stop - 1} -> {run_dir}")
+    strided = f" at stride {req.stride} (original frames {req.start * req.stride}..{(stop - 1) * req.stride})" \
+        if req.stride > 1 else ""
+    echo(f"gevi run: {req.method} on {seq_name} ({kind}), frames {req.start}..{stop - 1}{strided} -> {run_dir}")
 
     outcome = run_odometry(source, odometry, run_dir, status, T_B_C0=np.asarray(frontend.camera.T_B_C0),
                            start=req.start, stop=stop, kitti_rows=kitti_rows,

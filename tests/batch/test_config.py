@@ -35,6 +35,17 @@ BAD = {
                                         "format: kitti, frame: cam0}\n", ":8:", "declares format: kitti"),
     "baseline without a frame": (GOOD + "baselines:\n  - {name: orb, path: '{base}/{{sequence}}', file: g.txt, "
                                         "format: tum}\n", ":8:", "baselines.orb.frame: missing"),
+    "stride below 1": (GOOD.replace("    simulate:", "    stride: 0\n    simulate:"), ":6:",
+                       "sequences.s.stride: must be at least 1"),
+    "stamps on a stamped baseline": (GOOD + "baselines:\n  - {name: orb, path: '{base}/{{sequence}}', file: g.txt, "
+                                            "format: tum, frame: cam0, stamps: sequence}\n", ":8:",
+                                     "baselines.orb.stamps: only for format: kitti"),
+    "stride template without sequences": (GOOD + "baselines:\n  - {name: orb, path: '{base}/s{stride}', "
+                                                 "file: g.txt, format: tum, frame: cam0}\n", ":8:",
+                                          "baselines.orb.path: expected a path template"),
+    "stamps for a render": (GOOD + "baselines:\n  - {name: orb, path: '{base}/{{sequence}}', file: k.txt, "
+                                   "format: kitti, frame: cam0, stamps: sequence}\n", ":8:",
+                            "stamps: sequence needs a dataset (path:) sequence"),
     "not YAML": ("methods: [cfo\n", ":", "not valid YAML"),
 }
 
@@ -46,6 +57,7 @@ def test_bad_config_is_one_line_exit_2_before_any_run(case, tmp_path, capsys):
     (base / "s").mkdir(parents=True)
     (base / "s" / "f.txt").write_text("1.0 2.0 garbage\n")  # not a trajectory
     (base / "s" / "g.txt").write_text("0.0 0 0 0 0 0 0 1\n0.1 0 0 0 0 0 0 1\n")  # a TUM trajectory
+    (base / "s" / "k.txt").write_text("1 0 0 0 0 1 0 0 0 0 1 0\n" * 2)  # KITTI rows (no stamps)
     cfg = tmp_path / "bad.yaml"
     cfg.write_text(text.replace("{base}", str(base)).replace("{{sequence}}", "{sequence}"))
     out = tmp_path / "out"
