@@ -6,8 +6,9 @@ no GUI opens; every figure is saved as PNG and PDF.
 Per sequence ``S`` (in ``<out>/plots/``):
 
 * ``traj_S``: top view and side view of the GT and every method's aligned estimate (of a method with
-  trials, the trial with the median ATE).  KITTI (camera frame, y down): top = x-z, side = x-y;
-  otherwise (z up): top = x-y, side = x-z.  Metres.
+  trials, the trial with the median ATE), in the GT's world (:func:`world_of`, :func:`view_of`): a
+  z-up world (EuRoC ground truth): top = x-y; a KITTI camera world (x right, y down, z forward):
+  top = x-z, the road; any other: the two axes of largest extent.  Metres.
 * ``ate_S``: translation error (m) over time (s since the GT start; frame number for KITTI).
 * ``rpe_S``: box plots of the RPE translation (m) and rotation (deg) errors per method (all trials pooled).
 
@@ -17,16 +18,17 @@ over trials).
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 
-def _figure(w=10.0, h=4.5, ncols=1, nrows=1):
+def _figure(w=10.0, h=4.5, ncols=1, nrows=1, layout="constrained"):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(w, h), layout="constrained")
+    fig = Figure(figsize=(w, h), layout=layout)
     FigureCanvasAgg(fig)
     axes = fig.subplots(nrows, ncols, squeeze=False)
     return fig, axes.ravel()
@@ -49,6 +51,97 @@ def _thin(x: np.ndarray, n: int = 4000) -> np.ndarray:
     return x[:: max(1, len(x) // n)]
 
 
+#: Worlds a trajectory's positions can be in (``None``: unknown), with what each axis points at.
+#: ``z-up``: gravity-aligned, z up (GeVI's world after its initialisation; EuRoC and simulator ground
+#: truth).  ``camera-level``: the first camera frame of a level-mounted vehicle camera, x right, y down,
+#: z forward, so gravity is close to +y (KITTI ground truth; a stereo odometry's world on KITTI).
+#: ``camera``: a first camera frame whose attitude is unknown (x right, y down, z forward of that camera).
+WORLDS = {"z-up": ("horizontal", "horizontal", "up"), "camera-level": ("right", "down", "forward"),
+          "camera": ("right", "down", "forward")}
+_UP_AXIS = {"z-up": 2, "camera-level": 1}  # the axis along gravity of the gravity-aligned worlds
+
+
+def world_of(traj) -> str | None:
+    """The world of a trajectory read from a file, from its format: EuRoC ground truth is z-up (the
+    motion-capture world), a KITTI pose file is in the first cam0 frame of KITTI's level camera
+    (``camera-level``); any other format (TUM, bags) says nothing (None)."""
+    fmt = (getattr(traj, "meta", None) or {}).get("format")
+    if fmt == "euroc":
+        return "z-up"
+    if fmt in ("kitti", "kitti-idx") or getattr(traj, "indexed", False):
+        return "camera-level"
+    return None
+
+
+@dataclass(frozen=True)
+class View:
+    """How to draw positions (metres) of a world: ``top`` = (horizontal, vertical) axis indices of the
+    picture's top view, ``normal`` the third axis (up or down in a gravity-aligned world), ``labels``
+    per axis x, y, z, e.g. ``"z [m] (forward)"``; ``normal_down``: the normal axis points down (camera y),
+    so a side view flips it to show up as up."""
+
+    top: tuple
+    normal: int
+    labels: tuple
+    normal_down: bool = False
+
+
+def view_of(positions: np.ndarray, world: str | None) -> View:
+    """The view of ``positions`` ((n, 3) metres) in ``world`` (a key of :data:`WORLDS` or None).
+
+    A gravity-aligned world (``z-up``, ``camera-level``) is seen in the plane perpendicular to gravity
+    (x-y, respectively x-z: the road of a KITTI sequence, even where the camera's height changed more
+    than it moved sideways); any other from the normal of its two axes of largest extent.
+    """
+    if world in _UP_AXIS:
+        normal = _UP_AXIS[world]
+    else:
+        extent = np.ptp(np.asarray(positions, dtype=float).reshape(-1, 3), axis=0) if len(positions) else np.zeros(3)
+        normal = 2 - int(np.argmin(extent[::-1]))  # of equal extents the last: x-y for a still trajectory
+    top = tuple(a for a in range(3) if a != normal)
+    names = WORLDS.get(world)
+    labels = tuple(f"{'xyz'[a]} [m]" + (f" ({names[a]})" if names else "") for a in range(3))
+    return View(top=top, normal=normal, labels=labels, normal_down=names is not None and names[normal] == "down")
+
+
+def _draw_view(ax, view: View, series, side: bool = False) -> None:
+    """Plot ``series`` ((positions, matplotlib format, keyword dict) each) in ``view``: its top plane, or
+    ``side``: the longer top axis against the normal (up drawn up)."""
+    if side:
+        ext = [max((np.ptp(p[:, a]) if len(p) else 0.0) for p, _, _ in series) for a in view.top]
+        i, j = view.top[int(np.argmax(ext))], view.normal
+    else:
+        i, j = view.top
+    for p, fmt, kw in series:
+        ax.plot(p[:, i], p[:, j], fmt, **kw)
+    ax.set_xlabel(view.labels[i])
+    ax.set_ylabel(view.labels[j])
+    if side and view.normal_down:
+        ax.invert_yaxis()
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, alpha=0.3)
+
+
+def plot_run_trajectory(png: Path, est: np.ndarray, gt: np.ndarray | None, world: str | None, title: str) -> Path:
+    """One small top-view PNG of a run (320 x 320 px): the estimate's positions ``est`` ((n, 3) metres)
+    over the ground truth's ``gt`` (the same world, e.g. the aligned estimate; None: no ground truth)."""
+    fig, (ax,) = _figure(4.0, 4.0, layout=None)  # fixed margins: a constrained layout draws twice
+    fig.subplots_adjust(left=0.19, right=0.97, bottom=0.12, top=0.92)
+    series = ([(_thin(gt, 1000), "k--", {"lw": 1.0, "label": "ground truth"})] if gt is not None else []) + \
+        [(_thin(est, 1000), "-", {"lw": 1.0, "color": "tab:blue", "label": "estimate"})]
+    view = view_of(np.vstack([p for p, _, _ in series]), world)
+    _draw_view(ax, view, series)
+    ax.plot(*est[0, list(view.top)], "o", ms=3, color="tab:blue")  # where it starts
+    ax.set_title(title, fontsize=8)
+    ax.tick_params(labelsize=7)
+    ax.xaxis.label.set_size(8)
+    ax.yaxis.label.set_size(8)
+    if gt is not None:
+        ax.legend(fontsize=7, loc="upper right")
+    fig.savefig(png, dpi=80)
+    return Path(png)
+
+
 def representative(results):
     """Per method, the ok trial with the median ATE (None when all failed)."""
     out = {}
@@ -65,20 +158,13 @@ def plot_sequence(out_dir: Path, sequence: str, gt, results) -> list[Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
     reps = representative(results)
-    top, side = ((0, 2), (0, 1)) if gt.indexed else ((0, 1), (0, 2))
-    axis_names = "xyz"
     fig, (a1, a2) = _figure(12, 5.5, ncols=2)
-    g = _thin(gt.positions)
-    for ax, (i, j), title in ((a1, top, "top view"), (a2, side, "side view")):
-        ax.plot(g[:, i], g[:, j], "k--", lw=1.2, label="ground truth")
-        for m, r in reps.items():
-            p = _thin(r.aligned.positions)
-            ax.plot(p[:, i], p[:, j], lw=1.0, label=f"{m} ({r.align})")
-        ax.set_xlabel(f"{axis_names[i]} [m]")
-        ax.set_ylabel(f"{axis_names[j]} [m]")
+    series = [(_thin(gt.positions), "k--", {"lw": 1.2, "label": "ground truth"})] + \
+        [(_thin(r.aligned.positions), "-", {"lw": 1.0, "label": f"{m} ({r.align})"}) for m, r in reps.items()]
+    view = view_of(gt.positions, world_of(gt))
+    for ax, side, title in ((a1, False, "top view"), (a2, True, "side view")):
+        _draw_view(ax, view, series, side=side)
         ax.set_title(f"{sequence}: {title}")
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.grid(True, alpha=0.3)
     a1.legend(fontsize=8, loc="best")
     written += _save(fig, out_dir / f"traj_{_safe(sequence)}")
 

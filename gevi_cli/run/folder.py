@@ -14,6 +14,7 @@ Layout (``results/<method>/<sequence>/<timestamp>/`` by default, ``latest`` link
     traj_online_body.tum   the online (tracking-time) trajectory, body frame
     frames.csv             per frame: status, keyframe, matches, inliers, noise std
     timing.csv             per frame: ms per stage
+    trajectory.png         a small top view: the estimate over the ground truth where there is one
     eval/                  gevi eval's report against the ground truth, when there is one
 
 Every pose file is flushed after each row.
@@ -28,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from gevi_cli.errors import GeviError
 from gevi_cli.trajectory import Trajectory
 from gevi_cli.trajectory.formats import format_header, format_rows
 
@@ -125,3 +127,43 @@ def read_status(run_dir: Path) -> dict | None:
     except ValueError:
         return None
     return data if isinstance(data, dict) else None
+
+
+TRAJECTORY_PNG = "trajectory.png"
+
+
+def run_world(status: RunStatus, kind: str | None) -> str | None:
+    """The world of the run's body trajectory (a key of :data:`gevi_cli.evaluation.plots.WORLDS`, or None).
+
+    GeVI's world is gravity-aligned, z up, once its stereo-IMU initialisation happened (before, it is
+    the first cam0 frame).  A stereo odometry's (CFO) is the first body frame: on KITTI the body is cam0,
+    a level car camera (x right, y down, z forward); elsewhere its attitude is unknown.
+    """
+    if status.method == "gevi":
+        return "z-up" if (status.imu or {}).get("initialised", True) else "camera"
+    return "camera-level" if kind in ("kitti", "ov2slam-tracks") else None
+
+
+def write_trajectory_png(run_dir: Path, status: RunStatus, kind: str | None, pair=None) -> Path | None:
+    """``trajectory.png``: a small top view of the run (metres), in the plane perpendicular to gravity
+    where the world is known to be gravity-aligned.  ``pair``: the evaluation's PairResult, whose
+    aligned estimate is drawn over the matched ground truth in the ground truth's world; without one,
+    the primary trajectory alone in the run's world.  None when the run wrote no pose.  Cost
+    (scripts/bench_run_png.py): 50-70 ms to draw, plus 0.3 s importing matplotlib where the run has
+    not (a CFO run; GeVI's imu_states.png imports it anyway)."""
+    from gevi_cli.evaluation.plots import plot_run_trajectory, world_of
+    from gevi_cli.trajectory import read_trajectory
+
+    run_dir = Path(run_dir)
+    title = f"{status.method} on {status.sequence}"
+    if pair is not None and getattr(pair, "aligned", None) is not None:
+        gt = pair.association.gt
+        return plot_run_trajectory(run_dir / TRAJECTORY_PNG, pair.aligned.positions, gt.positions, world_of(gt),
+                                   f"{title} ({pair.align}-aligned) over ground truth")
+    try:
+        est = read_trajectory(run_dir / status.primary, frame="body")
+    except GeviError:  # no or an unreadable primary: no picture (status.json says why)
+        return None
+    if len(est) == 0:
+        return None
+    return plot_run_trajectory(run_dir / TRAJECTORY_PNG, est.positions, None, run_world(status, kind), title)

@@ -315,12 +315,14 @@ def execute(req: RunRequest, echo=print) -> int:
 
         plot_imu_states(run_dir / "imu_states.csv", run_dir / "imu_states.png")
     gt = _gt_source(req, source)
+    pair = None
     if gt is not None:
-        _evaluate(run_dir, req, cfg, gt, seq_name, st, echo)
+        pair = _evaluate(run_dir, req, cfg, gt, seq_name, st, echo)
     else:
         echo("no ground truth: not evaluated (give --gt FILE)")
-    from gevi_cli.run.folder import write_status
+    from gevi_cli.run.folder import write_status, write_trajectory_png
 
+    write_trajectory_png(run_dir, st, kind, pair)
     write_status(run_dir, st)
     echo(f"wrote {run_dir} ({time.perf_counter() - t_start:.1f} s)")
     if st.state != "ok":
@@ -328,23 +330,26 @@ def execute(req: RunRequest, echo=print) -> int:
     return outcome.exit_code
 
 
-def _evaluate(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status, echo) -> None:
+def _evaluate(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status, echo):
     """`gevi eval --gt GT -e METHOD=RUN/traj_body.tum` into RUN/eval (the same code path).
 
     The config's alignment (SE(3): what every comparison across methods uses) is primary; a
     stereo-inertial run adds posyaw (4-DOF, gravity known) beside it in RUN/eval/posyaw.
+    Returns the primary alignment's PairResult (None when the evaluation failed).
     """
     aligns = [cfg.run.align] + (["posyaw"] if req.method == "gevi" and cfg.run.align != "posyaw" else [])
     status.evaluation = {}
     for k, align in enumerate(aligns):
         out = run_dir / "eval" if k == 0 else run_dir / "eval" / align
-        ev = _evaluate_one(run_dir, req, cfg, gt, seq_name, status, align, out, echo)
+        ev, result = _evaluate_one(run_dir, req, cfg, gt, seq_name, status, align, out, echo)
         if k == 0:
             status.evaluation.update(ev)
+            primary = result
         else:
             status.evaluation[align] = ev
     if req.method == "gevi":
         _evaluate_tilt(run_dir, gt, status, echo)
+    return primary
 
 
 def _evaluate_tilt(run_dir: Path, gt, status, echo) -> None:
@@ -377,7 +382,8 @@ def _evaluate_tilt(run_dir: Path, gt, status, echo) -> None:
          "direction, no alignment; needs a gravity-aligned ground truth)")
 
 
-def _evaluate_one(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status, align: str, out: Path, echo) -> dict:
+def _evaluate_one(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status, align: str, out: Path, echo):
+    """(the status.json evaluation entries, the PairResult or None when it failed)."""
     from gevi_cli.evaluation.runner import run_eval
 
     try:
@@ -389,18 +395,18 @@ def _evaluate_one(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status
             quiet=True, echo=lambda *a, **k: None)  # the run prints its own one-line summary
     except GeviError as err:  # the run is complete on disk; an unusable evaluation must not hide it
         echo(f"evaluation failed: {err.one_line()}")
-        return {"failed": err.one_line()}
+        return {"failed": err.one_line()}, None
     r = results[0]
     for w in r.warnings:
         echo(f"gevi: warning: {w}", err=True)
     if not (r.ok and r.ate is not None):
         echo(f"evaluation failed: {r.reason}")
-        return {"failed": r.reason}
+        return {"failed": r.reason}, None
     rpe = r.rpe.trans_rmse if r.rpe is not None else float("nan")
     echo(f"ATE {_metres(r.ate.trans_rmse)}, RPE {_metres(rpe)} ({r.align.upper()}, body frame, RPE over "
          f"{cfg.run.rpe_delta:g} frame; {r.association.summary()})")
     return {"align": r.align, "ate_m": r.ate.trans_rmse, "rpe_m": rpe,
-            "ate_rot_deg": getattr(r.ate, "rot_rmse_deg", None), "matched": r.association.n_matched}
+            "ate_rot_deg": getattr(r.ate, "rot_rmse_deg", None), "matched": r.association.n_matched}, r
 
 
 def _metres(x: float) -> str:
