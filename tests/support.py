@@ -5,21 +5,24 @@ Test helpers live here rather than in conftest.py because every folder has its o
 """
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
 
+from gevi_cli.shared_data import shared_data_dir
+
 REPO = Path(__file__).resolve().parents[1]
-SHARED_DATA = Path(os.environ.get("GEVI_SHARED_DATA") or REPO.parent / "shared" / "data")
-"""The read-only data folder: ../shared/data next to the repo, or $GEVI_SHARED_DATA (e.g. from a worktree)."""
+SHARED_DATA = shared_data_dir()
+"""The read-only data folder: $GEVI_SHARED_DATA, else ../shared/data next to the repo (the one resolver the
+batch configs use too: gevi_cli/shared_data.py)."""
 
 
 def shared_path(*parts: str) -> Path:
     """Path under ../shared/data, or skip the test with the reason when it is absent."""
     path = SHARED_DATA.joinpath(*parts)
     if not path.exists():
-        pytest.skip(f"real data not available: {path} is absent (the read-only ../shared/data folder next to the repo)")
+        pytest.skip(f"real data not available: {path} is absent (the read-only ../shared/data next to the repo, "
+                    "or $GEVI_SHARED_DATA)")
     return path
 
 

@@ -158,8 +158,11 @@ class BatchConfig:
     raw: dict = field(default_factory=dict)
 
     def resolve(self, p: str) -> Path:
+        """``p`` against ``root``; ``../shared/data/...`` under ``$GEVI_SHARED_DATA`` when that is set."""
+        from gevi_cli.shared_data import redirect
+
         q = Path(p).expanduser()
-        return q if q.is_absolute() else (self.root / q)
+        return q if q.is_absolute() else (redirect(q) or self.root / q)
 
     def method(self, name: str) -> MethodEntry:
         return next(m for m in self.methods if m.name == name)

@@ -15,6 +15,9 @@ import pytest
 from helpers import markers, trajectory_bytes, tree
 from support import run_cli
 
+# every test here uses the session's small batch (about 25 s to make) and runs batches of its own
+pytestmark = pytest.mark.slow
+
 
 def test_small_batch_results_tree_and_report(small_batch):
     out, code, lines = small_batch

@@ -157,6 +157,7 @@ def mc4():
     return {n: mc.run4(n, RUNS[n], seed=1000 + n, extra=_becov_extra) for n in NS}
 
 
+@pytest.mark.slow
 def test_be_removes_ls_translation_bias(mc4):
     # spec 15 rule: |b_BE| < max(0.25 b_LS, 3 SE) with SE = RMSE_BE / sqrt(runs) per axis
     for n in (300, 1000):
@@ -169,6 +170,7 @@ def test_be_removes_ls_translation_bias(mc4):
     assert b1000 > 10 * mc4[1000].se_t("be")  # and it is far from zero
 
 
+@pytest.mark.slow
 def test_gn_rmse_slope(mc4):
     ns = np.array([50, 100, 300, 1000])
     for metric in ("yaw", "t"):
@@ -177,6 +179,7 @@ def test_gn_rmse_slope(mc4):
         assert -0.6 < slope < -0.4, (metric, slope)
 
 
+@pytest.mark.slow
 def test_gn_efficiency_vs_crlb4(mc4):
     # within 10 % of the root-mean CRLB4 for n >= 300 and 20 % at n = 100 (yaw and translation)
     for n, tol in ((100, 0.20), (300, 0.10), (1000, 0.10)):
@@ -189,6 +192,7 @@ def test_gn_efficiency_vs_crlb4(mc4):
         assert r.rmse_yaw("gn") < r.rmse_yaw("be") and r.rmse_t("gn") < r.rmse_t("be")
 
 
+@pytest.mark.slow
 def test_gn_with_be_cov_efficiency(mc4):
     # BE kept along directions where cost (1) is less informative than BE (pnp4_gn be_cov): the
     # heavy tail of the collinear-centre runs disappears; yaw stays at CRLB4, translation goes

@@ -8,10 +8,11 @@ from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
+from support import SHARED_DATA
 
 from gevi_cli.trajectory import Trajectory
 
-DATA = (Path(__file__).resolve().parents[2] / ".." / "shared" / "data").resolve()
+DATA = SHARED_DATA  # $GEVI_SHARED_DATA, else ../shared/data next to the repo (support.py)
 TRAJ = DATA / "trajectories"
 
 

@@ -97,6 +97,7 @@ def test_rpg_runs_posyaw_ge_se3_ge_sim3(traj_data, seq):
         assert e[0] >= e[1] >= e[2], (k, e)
 
 
+@pytest.mark.slow
 def test_rpg_trials_table_through_cli(traj_data, tmp_path):
     root = traj_data / RPG.rsplit("/", 1)[0]
     p = run_cli(["--results", root, "--method", "vislam_rp", "--align", "auto", "--min-coverage", "0.5",

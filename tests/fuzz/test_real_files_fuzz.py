@@ -45,6 +45,7 @@ def test_real_trajectories_with_bom_and_crlf_read_the_same(tmp_path):
         _equal(read_trajectory(copy), read_trajectory(path))
 
 
+@pytest.mark.slow
 def test_real_trajectories_at_utm_and_ecef_offsets(tmp_path):
     rng = np.random.default_rng(0)
     offsets = [(512_345.678, 4_512_345.678, 250.0), (4_205_000.0, 168_000.0, 4_778_000.0)]  # UTM, ECEF in turn

@@ -39,6 +39,7 @@ def test_standstill_gyro_bias_and_gravity(euroc, window_s):
     assert angle < 0.65
 
 
+@pytest.mark.slow
 def test_gevi_imu_report_over_the_whole_stream(tmp_path, capsys):
     """Tilt RMSE of the adaptive IMU-only filter <= 1.2 deg over 145.6 s (gravity-direction angle), and
     better than gyro-only integration and the best fixed-gain complementary filter, measured alike."""

@@ -99,6 +99,7 @@ def test_refined_accelerometer_bias_after_a_standstill_is_along_gravity(gevi_sim
     assert abs(b @ up - full @ up) <= np.linalg.norm(full) * tilt_err + 1e-12
 
 
+@pytest.mark.slow
 def test_written_trajectory_has_no_attitude_step_at_keyframes(tmp_path, capsys):
     """The gravity re-levelling of a keyframe is spread over the frames since the previous keyframe:
     the frame-to-frame rotation error of the steps that end at a keyframe is of the size of the others
@@ -202,6 +203,7 @@ def test_imu_gap_degrades_to_visual_and_is_reported(pool_render, tmp_path, capsy
     assert st["frames_tracked"] == st["frames_done"]
 
 
+@pytest.mark.slow
 def test_slow_moving_start_initialises_from_stereo_odometry(tmp_path, capsys):
     """Accelerations below 0.15 m/s^2 and no standstill: the first 2 s of stereo odometry give gravity
     within 0.5 deg and the gyro bias within 2e-3 rad/s per axis (spec 9, with the b_a prior), and the
@@ -228,6 +230,7 @@ def test_slow_moving_start_initialises_from_stereo_odometry(tmp_path, capsys):
     assert np.all(np.abs(s.loc[k, ["bgx", "bgy", "bgz"]].to_numpy(float) - gt[i, 11:14]) < 2e-3)
 
 
+@pytest.mark.slow
 def test_standstill_on_a_faint_lamp_lit_floor_ends_when_the_motion_starts(tmp_path, capsys):
     """pool-hard seed 1 (a feature-poor floor under the vehicle's lamps; configs/pool.yaml removes the
     shading): at rest for 1.5 s, then a smooth start.  The floor's faint features random-walk at rest
@@ -393,6 +396,7 @@ def test_in_flight_bias_is_adopted_and_recorded(pool_render, tmp_path, capsys):
     assert np.ptp(b[:, 2]) < 0.1 * (np.ptp(b[:, 0]) + np.ptp(b[:, 1]))
 
 
+@pytest.mark.slow
 def test_chi_square_gate_keeps_wrong_stereo_depths_out_of_the_bcd(pool_render, tmp_path, monkeypatch):
     """Every 7th keyframe point gets twice its depth (a wrong stereo match the 2D-2D RANSAC cannot
     see; the l1 stage is off so that only the gate stands between them and the BCD, and the BA too, so
