@@ -13,7 +13,7 @@ Per sequence ``S`` (in ``<out>/plots/``):
 * ``rpe_S``: box plots of the RPE translation (m) and rotation (deg) errors per method (all trials pooled).
 
 And ``summary_ate``: grouped bars of the ATE translation RMSE per sequence and method (error bars: std
-over trials).
+over trials).  ``gevi run`` adds one small PNG to every run folder (:func:`plot_run_trajectory`).
 """
 from __future__ import annotations
 

@@ -149,7 +149,7 @@ def write_trajectory_png(run_dir: Path, status: RunStatus, kind: str | None, pai
     where the world is known to be gravity-aligned.  ``pair``: the evaluation's PairResult, whose
     aligned estimate is drawn over the matched ground truth in the ground truth's world; without one,
     the primary trajectory alone in the run's world.  None when the run wrote no pose.  Cost
-    (scripts/bench_run_png.py): 50-70 ms to draw, plus 0.3 s importing matplotlib where the run has
+    (scripts/bench_run_png.py): 40-70 ms to draw, plus 0.3 s importing matplotlib where the run has
     not (a CFO run; GeVI's imu_states.png imports it anyway)."""
     from gevi_cli.evaluation.plots import plot_run_trajectory, world_of
     from gevi_cli.trajectory import read_trajectory

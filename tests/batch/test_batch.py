@@ -58,8 +58,7 @@ def test_resume_after_kill_completes_only_missing_runs(small_config, small_batch
                              "--jobs", "1"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
                             start_new_session=True)
     try:
-        deadline = time.monotonic() + 180
-        while not markers(out) and time.monotonic() < deadline and proc.poll() is None:
+        while not markers(out) and proc.poll() is None:  # no deadline: the batch ends by itself (no clock)
             time.sleep(0.02)
     finally:
         if proc.poll() is None:
