@@ -7,7 +7,7 @@ import click
 
 from gevi_cli.errors import GeviError
 
-PRESET_NAMES = ("pool-easy", "pool-hard", "euroc-like", "kitti-like")
+PRESET_NAMES = ("pool-easy", "pool-hard", "euroc-like", "kitti-like", "kitti-highway")
 
 EPILOG = """\b
 Examples:
@@ -67,7 +67,7 @@ def command(preset, out_dir, fmt, duration, rate, resolution, baseline, seed, im
             name, overwrite, sample, quiet):
     """Render a synthetic stereo-IMU sequence with exact ground truth.
 
-    PRESET is one of pool-easy, pool-hard, euroc-like, kitti-like; OUT_DIR is created (it must not
+    PRESET is one of pool-easy, pool-hard, euroc-like, kitti-like, kitti-highway; OUT_DIR is created (it must not
     exist or be empty unless --overwrite).  Same seed and options give byte-identical files.
     """
     if sample:

@@ -1,4 +1,4 @@
-"""The four simulator presets and the builders that turn a preset + seed into a rig and a trajectory.
+"""The five simulator presets and the builders that turn a preset + seed into a rig and a trajectory.
 
 Frames: world W (z up), body B = IMU frame (x forward, y left, z up when level), camera C (x right,
 y down, z forward).  ``T_B_C0`` is camera -> body; the right camera sits at ``+baseline`` along the
@@ -148,6 +148,16 @@ PRESETS: dict[str, PresetSpec] = {
         rate_hz=10.0, baseline_m=0.54, duration_s=60.0, facing="forward",
         lever_arm_m=(0.8, 0.32, 0.75), mount_deg=(0.3, -0.5, 0.2),
         motion=CarParams(), scene="kitti-like", sensor=SensorModel(exposure=1.0, vignetting=1.5),
+    ),
+    "kitti-highway": PresetSpec(
+        name="kitti-highway",
+        description="highway: the kitti-like rig at ~27 m/s (2.7 m per frame) on gentle curves (radius > 1 km), "
+                    "a road plane and only far structures (35-90 m away)",
+        camera=CameraModel(1241, 376, 718.856, 718.856, 607.1928, 185.2157),
+        rate_hz=10.0, baseline_m=0.54, duration_s=30.0, facing="forward",
+        lever_arm_m=(0.8, 0.32, 0.75), mount_deg=(0.3, -0.5, 0.2),
+        motion=CarParams(speed=27.0, road_amp=40.0, road_wavelengths=(1800.0, 3000.0), surge_amp=1.5),
+        scene="kitti-highway", sensor=SensorModel(exposure=1.0, vignetting=1.5),
     ),
 }
 

@@ -2,7 +2,8 @@
 
 World frame W, z up.  Pool: x in [0, 10], y in [0, 5], floor z = 0, water surface z = 2.  Room
 (euroc-like): x in [-4, 4], y in [-3, 3], z in [0, 3].  Street (kitti-like): ground z = 0, the road
-centre line follows the car motion's ``road(x)`` with facades on both sides.
+centre line follows the car motion's ``road(x)`` with facades on both sides.  Highway (kitti-highway):
+the same ground plane, and only far structures (warehouse facades and tree lines 35-90 m from the road).
 """
 from __future__ import annotations
 
@@ -190,6 +191,39 @@ def kitti_street(seed: int, road, x_range: tuple[float, float]) -> Scene:
     return Scene(tuple(planes), sky=0.75, sky_gradient=0.25, name="kitti-like")
 
 
+def kitti_highway(seed: int, road, x_range: tuple[float, float]) -> Scene:
+    """Ground plane plus far structures along ``y = road(x)`` for x in ``x_range`` (world metres):
+    warehouse facades and tree lines 35-90 m either side of the road, 6-18 m high, with open gaps, so
+    that apart from the road surface the texture is far (a few pixels of disparity at 0.54 m baseline)."""
+    rng = _rng(seed, 8)
+    g_texel = 0.01
+    ground = tx.make_periodic(tx.asphalt((832, 832), rng, 1.0 / g_texel), 32)  # 8 m period
+    planes = [rect_plane([0, 0, 0], EX, EY, np.inf, np.inf, Texture.from_image(ground, g_texel, wrap=True),
+                         gain=1.0, name="ground")]
+    f_texel = 0.06  # coarser than the street's: seen from 35 m and more
+    shape = (int(20 / f_texel), int(32 / f_texel))
+    styles = [Texture.from_image(tx.facade(shape, _rng(seed, 80 + i), 1 / f_texel), f_texel) for i in range(4)]
+    styles += [Texture.from_image(tx.normalize(tx.value_noise(shape, _rng(seed, 90 + i), cell_px=0.8 / f_texel,
+                                                              octaves=4), 0.08, 0.5), f_texel) for i in range(4)]
+    road_y = lambda x: float(road(np.array([x]))[0][0])  # noqa: E731
+    for side in (-1.0, 1.0):
+        x = x_range[0] - rng.uniform(0, 40)
+        while x < x_range[1]:
+            width = rng.uniform(20.0, 32.0)
+            gap = rng.uniform(10.0, 60.0) if rng.random() < 0.5 else 0.0
+            setback = rng.uniform(35.0, 90.0)
+            height = rng.uniform(6.0, 18.0)
+            xa, xb = x + gap, x + gap + width
+            pa = np.array([xa, road_y(xa) + side * setback, 0.0])
+            pb = np.array([xb, road_y(xb) + side * setback, 0.0])
+            seg = pb - pa
+            tex = styles[int(rng.integers(0, len(styles)))]
+            planes.append(rect_plane(pa + EZ * height, seg, -EZ, min(float(np.linalg.norm(seg)), tex.period_u), height,
+                                     tex, gain=float(rng.uniform(0.8, 1.1)), name=f"far{side:+.0f}_{xa:.0f}"))
+            x = xb
+    return Scene(tuple(planes), sky=0.75, sky_gradient=0.25, name="kitti-highway")
+
+
 def build_scene(spec, seed: int, motion, duration: float) -> Scene:
     """The scene of preset ``spec`` for ``seed`` (the street depends on the car's road)."""
     if spec.scene == "pool-easy":
@@ -201,4 +235,7 @@ def build_scene(spec, seed: int, motion, duration: float) -> Scene:
     if spec.scene == "kitti-like":
         x_end = float(motion(np.array([duration])).p_W[0, 0]) + 150.0
         return kitti_street(seed, motion.road, (-30.0, x_end))
+    if spec.scene == "kitti-highway":
+        x_end = float(motion(np.array([duration])).p_W[0, 0]) + 300.0  # far structures are seen from afar
+        return kitti_highway(seed, motion.road, (-60.0, x_end))
     raise ValueError(f"unknown scene {spec.scene!r}")

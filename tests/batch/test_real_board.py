@@ -14,13 +14,14 @@ REAL = REPO / "configs" / "batch" / "real.yaml"
 def test_real_board_parses():
     from gevi_cli.batch.config import load_batch_config
     from gevi_cli.batch.plan import baseline_runs, expand
+    from gevi_cli.simulate.presets import PRESETS
 
     cfg = load_batch_config(REAL)
     seqs = {s.name: s for s in cfg.sequences}
     assert {m.name for m in cfg.methods} == {"cfo", "gevi"}
     assert [seqs[f"kitti06_head{s}"].inputs.stride for s in ("", "_stride2", "_stride3")] == [1, 2, 3]
     assert {"euroc_micro", "kitti04_tracks_gray", "kitti04_tracks_colour"} <= set(seqs)
-    assert {s.sim.preset for s in cfg.sequences if s.sim} == {"pool-easy", "pool-hard", "euroc-like", "kitti-like"}
+    assert {s.sim.preset for s in cfg.sequences if s.sim} == set(PRESETS)  # a render of each preset
     assert all(s.optional for s in cfg.sequences if s.path)  # real rows skip without ../shared/data
     runs = expand(cfg, Path("/tmp/x"))
     assert {r.method for r in runs if r.sequence == "euroc_micro"} == {"cfo", "gevi"}
