@@ -10,7 +10,9 @@ from gevi_cli.trajectory.formats import WRITE_FORMATS
 @click.argument("src", type=click.Path())
 @click.argument("dst", type=click.Path())
 @click.option("--to", "fmt", type=click.Choice(WRITE_FORMATS), required=True, help="Output format.")
-def command(src, dst, fmt):
+@click.option("--allow-jumps", is_flag=True,
+              help="Read a trajectory whose position jumps (refused by default as corrupt rows) as written.")
+def command(src, dst, fmt, allow_jumps):
     """Read SRC (format detected from its content) and write DST as TUM, EuRoC csv or KITTI.
 
     Stamps are kept exactly (ns); KITTI output drops them (row i is pose i, or the frame index for
@@ -18,7 +20,7 @@ def command(src, dst, fmt):
     """
     from gevi_cli.trajectory import read_trajectory, write_trajectory
 
-    traj = read_trajectory(src)
+    traj = read_trajectory(src, allow_jumps=allow_jumps)
     for warning in traj.meta["warnings"]:
         click.echo(f"warning: {warning}", err=True)
     if fmt in ("tum", "euroc") and traj.indexed:

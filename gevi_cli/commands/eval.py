@@ -51,9 +51,13 @@ Results tree: <root>/<method>/<sequence>/ holding one trajectory file, run*/ tri
 @click.option("-o", "--out", metavar="DIR", help="Eval folder (default eval/<name from inputs>; never overwritten).")
 @click.option("--overwrite", is_flag=True, help="Allow writing into an existing, non-empty --out folder.")
 @click.option("--keep-going", is_flag=True, help="Turn an unreadable estimate into a failed cell instead of stopping.")
+@click.option("--allow-jumps", is_flag=True,
+              help="Read trajectories whose position jumps (refused by default as corrupt rows) as written; "
+                   "the tables say so.")
 @click.option("-q", "--quiet", is_flag=True, help="Print only the tables and the eval folder.")
 def command(gt_opts, estimates, results_root, only_methods, gt_root, sequence_name, align, n_align, max_diff, t_offset, rpe_delta,
-            rpe_unit, min_coverage, est_frame, gt_frame, t_b_c0, no_kitti, no_plots, out, overwrite, keep_going, quiet):
+            rpe_unit, min_coverage, est_frame, gt_frame, t_b_c0, no_kitti, no_plots, out, overwrite, keep_going, allow_jumps,
+            quiet):
     """Evaluate estimates against ground truth: ATE, RPE, KITTI t_err/r_err; tables and plots."""
     from gevi_cli.evaluation.runner import run_eval
 
@@ -62,5 +66,5 @@ def command(gt_opts, estimates, results_root, only_methods, gt_root, sequence_na
         sequence_name=sequence_name, align=align, n_align=n_align, max_diff=max_diff, t_offset=t_offset,
         rpe_delta=rpe_delta, rpe_unit=rpe_unit, min_coverage=min_coverage, est_frame=est_frame, gt_frame=gt_frame,
         t_b_c0=t_b_c0, kitti=not no_kitti, plots=not no_plots, out=out, overwrite=overwrite,
-        keep_going=keep_going, quiet=quiet, only_methods=only_methods, echo=click.echo,
+        keep_going=keep_going, quiet=quiet, only_methods=only_methods, echo=click.echo, allow_jumps=allow_jumps,
     )

@@ -20,6 +20,9 @@ from gevi_cli.trajectory import Trajectory
 
 #: Translational RPE above this multiple of what the aligned position errors imply flags a frame mix-up.
 FRAME_MIXUP_RATIO = 3.0
+#: An ATE RMSE above this multiple of (the matched ground truth's extent + 1 m) is not an error of a
+#: real estimate in the ground truth's world: the estimate is corrupt (or diverged beyond meaning).
+ABSURD_ATE_RATIO = 1000.0
 
 
 @dataclass(frozen=True)
@@ -35,6 +38,7 @@ class EvalSettings:
     min_coverage: float = 0.9
     est_frame: str = "same"  # "same" (as the GT), "body" or "cam0"
     kitti: bool = True
+    allow_jumps: bool = False  # trajectories with position jumps were read as written (--allow-jumps)
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -62,6 +66,7 @@ class PairResult:
     warnings: list = field(default_factory=list)
     aligned: Trajectory | None = None  # aligned, matched estimate (for plots)
     lost: bool = False  # the run lost tracking: some of its poses were bridged, not estimated (batch)
+    jumps: list = field(default_factory=list)  # position jumps read as written (--allow-jumps), "file:line: ..."
 
     @property
     def ok(self) -> bool:
@@ -69,7 +74,8 @@ class PairResult:
 
     def as_dict(self) -> dict:
         d = {"method": self.method, "sequence": self.sequence, "trial": self.trial, "path": self.path,
-             "status": self.status, "reason": self.reason, "align": self.align, "warnings": list(self.warnings)}
+             "status": self.status, "reason": self.reason, "align": self.align, "warnings": list(self.warnings),
+             "allowed_jumps": list(self.jumps)}
         if self.association is not None:
             a = self.association
             d["association"] = {"matched": a.n_matched, "est_poses": a.n_est, "gt_poses": a.n_gt,
@@ -129,6 +135,21 @@ def frame_mixup_warning(assoc: Association, est_aligned: Trajectory, rpe: RpeRes
     return None
 
 
+def absurd_ate_reason(gt: Trajectory, ate: AteResult) -> str | None:
+    """Why an ATE (m) cannot be a real estimate's error against ``gt`` (the matched ground truth), or None.
+
+    After any alignment a real estimate's poses stay in the ground truth's world: its RMSE is at most
+    a few times the ground truth's extent (bounding-box diagonal, m), even for a run that drifted badly.
+    :data:`ABSURD_ATE_RATIO` times that extent (+1 m, for a ground truth standing still) is beyond any
+    such estimate; a corrupt file (a column scaled, a frame offset added) reaches it easily.
+    """
+    extent = float(np.linalg.norm(np.ptp(gt.positions, axis=0)))
+    if ate.trans_rmse <= ABSURD_ATE_RATIO * (extent + 1.0):  # a nan ATE is not physical either
+        return None
+    return (f"ATE {ate.trans_rmse:.3g} m is not physical: {ate.trans_rmse / (extent + 1.0):.3g} x the ground truth's "
+            f"extent ({extent:.3g} m + 1 m); the estimate is corrupt (or diverged)")
+
+
 def evaluate_pair(gt: Trajectory, est: Trajectory, settings: EvalSettings, align_method: str, *, method: str,
                   sequence: str, trial: str = "", T_B_C0: np.ndarray | None = None,
                   gt_raw: tuple | None = None) -> PairResult:
@@ -137,6 +158,7 @@ def evaluate_pair(gt: Trajectory, est: Trajectory, settings: EvalSettings, align
     where = path or est.name
     res = PairResult(method, sequence, trial, path, align=align_method)
     res.warnings.extend(est.meta.get("warnings", []))
+    res.jumps = list(gt.meta.get("allowed_jumps", [])) + list(est.meta.get("allowed_jumps", []))
     if len(est) == 0:
         return failed(method, sequence, trial, path, "no valid poses")
     est_f = to_gt_frame(est, settings.est_frame, gt.frame, T_B_C0, where)
@@ -152,6 +174,10 @@ def evaluate_pair(gt: Trajectory, est: Trajectory, settings: EvalSettings, align
     res.alignment = alignment
     res.aligned = aligned
     res.ate = compute_ate(assoc.gt, aligned)
+    absurd = absurd_ate_reason(assoc.gt, res.ate)
+    if absurd:
+        res.status, res.reason = "failed", absurd
+        return res
     try:
         res.rpe = compute_rpe(assoc.gt, aligned, settings.rpe_delta, settings.rpe_unit)
     except GeviError as exc:

@@ -279,15 +279,18 @@ def load_T_B_C0(path: Path) -> np.ndarray:
     return matrix(vals.reshape(4, 4), path, "T_B_C0")  # the checks every calibration reader applies
 
 
-def load_groundtruth(path: Path, gt_frame: str = "body"):
-    """(Trajectory, T_B_C0 or None) from a trajectory file or a dataset folder."""
+def load_groundtruth(path: Path, gt_frame: str = "body", allow_jumps: bool = False):
+    """(Trajectory, T_B_C0 or None) from a trajectory file or a dataset folder.
+
+    ``allow_jumps``: a ground-truth *file* with position jumps is read as written (--allow-jumps).
+    """
     from gevi_cli.trajectory import read_trajectory
 
     path = Path(path)
     if path.is_dir():
         gt_file = gt_file_in(path) if not (path / "mav0").exists() else None
         if gt_file is not None and not _is_dataset(path):
-            return read_trajectory(gt_file, name="groundtruth", frame=gt_frame), None
+            return read_trajectory(gt_file, name="groundtruth", frame=gt_frame, allow_jumps=allow_jumps), None
         from gevi_cli.datasets import open_sequence
 
         seq = open_sequence(path)
@@ -297,7 +300,7 @@ def load_groundtruth(path: Path, gt_frame: str = "body"):
         return gt, np.asarray(seq.calibration.T_B_C0, dtype=np.float64)
     if not path.exists():
         raise GeviError(path, "no such ground-truth file or dataset folder")
-    return read_trajectory(path, name="groundtruth", frame=gt_frame), None
+    return read_trajectory(path, name="groundtruth", frame=gt_frame, allow_jumps=allow_jumps), None
 
 
 def _is_dataset(path: Path) -> bool:

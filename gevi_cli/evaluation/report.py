@@ -56,9 +56,20 @@ def alignment_note(results, settings) -> str:
     return f"alignment: {'; '.join(parts)} ({n})"
 
 
+def jumps_note(results, settings) -> str:
+    """What ``--allow-jumps`` did, for every table's note ("" when it was not given)."""
+    if not settings.allow_jumps:
+        return ""
+    which = list(dict.fromkeys(f"{r.method}/{r.sequence}" for r in results if r.jumps))
+    if not which:
+        return "--allow-jumps: no input had a position jump"
+    return f"--allow-jumps: position jumps read as written (possibly corrupt rows) in {', '.join(which)}"
+
+
 def build_tables(results, methods, sequences, settings) -> list[Table]:
     note_align = alignment_note(results, settings)
     rpe_note = f"RPE delta {settings.rpe_delta:g} {settings.rpe_unit}"
+    jumps = jumps_note(results, settings)
     tables = []
     for key, title, unit, get in METRICS:
         cells = {}
@@ -72,7 +83,7 @@ def build_tables(results, methods, sequences, settings) -> list[Table]:
             elif not r.ok:
                 c.reasons.append(r.reason)
         t = Table(key, f"{title} [{unit}] — {note_align}", list(methods), list(sequences), cells,
-                  note=rpe_note if key.startswith("rpe") else "")
+                  note="; ".join(filter(None, [rpe_note if key.startswith("rpe") else "", jumps])))
         if key.startswith("kitti") and t.is_empty():
             continue  # no 100 m segment anywhere (short sequences)
         tables.append(t)
@@ -148,7 +159,10 @@ def write_report(out: Path, tables, results, sequences_info: dict, settings, inp
             written.append(p)
         md_all.append(md)
         tex_all.append(tex)
-    (out / "summary.md").write_text("# gevi eval\n\n" + "\n".join(md_all))
+    failed = [f"- {r.method}/{r.sequence}" + (f"/{r.trial}" if r.trial else "") + f": {r.reason}"
+              for r in results if not r.ok]
+    why = ["## Failed cells\n\n" + "\n".join(failed) + "\n"] if failed else []
+    (out / "summary.md").write_text("# gevi eval\n\n" + "\n".join(md_all + why))
     (tdir / "all.tex").write_text("% requires \\usepackage{booktabs}\n" + "\n".join(tex_all))
     written += [out / "summary.md", tdir / "all.tex"]
 

@@ -10,7 +10,8 @@ from gevi_cli.evaluation import inputs as inp
 from gevi_cli.evaluation.evaluate import EvalSettings, evaluate_pair, failed
 
 
-def _settings(align, n_align, max_diff, t_offset, rpe_delta, rpe_unit, min_coverage, est_frame, kitti) -> EvalSettings:
+def _settings(align, n_align, max_diff, t_offset, rpe_delta, rpe_unit, min_coverage, est_frame, kitti,
+              allow_jumps=False) -> EvalSettings:
     if min_coverage > 1.0:
         min_coverage = min_coverage / 100.0
     if not 0.0 <= min_coverage <= 1.0:
@@ -23,7 +24,7 @@ def _settings(align, n_align, max_diff, t_offset, rpe_delta, rpe_unit, min_cover
         raise GeviError("--rpe-delta", f"must be positive, got {rpe_delta:g}")
     return EvalSettings(align=align, n_align=n_align, max_diff_s=max_diff, t_offset_s=t_offset,
                         rpe_delta=rpe_delta, rpe_unit=rpe_unit, min_coverage=min_coverage, est_frame=est_frame,
-                        kitti=kitti)
+                        kitti=kitti, allow_jumps=allow_jumps)
 
 
 def collect_specs(gt_opts, estimates, results_root, gt_root, sequence_name):
@@ -86,9 +87,10 @@ def collect_specs(gt_opts, estimates, results_root, gt_root, sequence_name):
 
 def run_eval(*, gt_opts, estimates, results_root, gt_root, sequence_name, align, n_align, max_diff, t_offset,
              rpe_delta, rpe_unit, min_coverage, est_frame, gt_frame, t_b_c0, kitti, plots, out, overwrite,
-             keep_going, quiet, only_methods=(), echo=print):
+             keep_going, quiet, only_methods=(), echo=print, allow_jumps=False):
     t_start = time.perf_counter()
-    settings = _settings(align, n_align, max_diff, t_offset, rpe_delta, rpe_unit, min_coverage, est_frame, kitti)
+    settings = _settings(align, n_align, max_diff, t_offset, rpe_delta, rpe_unit, min_coverage, est_frame, kitti,
+                         allow_jumps)
     specs, seq_gt = collect_specs(gt_opts, estimates, results_root, gt_root, sequence_name)
     if only_methods:
         wanted = [m for item in only_methods for m in item.split(",") if m]
@@ -111,7 +113,7 @@ def run_eval(*, gt_opts, estimates, results_root, gt_root, sequence_name, align,
 
     gts, seq_info = {}, {}
     for seq in sequences:
-        gt, T = inp.load_groundtruth(seq_gt[seq], gt_frame)
+        gt, T = inp.load_groundtruth(seq_gt[seq], gt_frame, allow_jumps)
         T = T_override if T_override is not None else T
         gts[seq] = (gt, T, raw_poses(gt) if gt.indexed else None)
         seq_info[seq] = {"groundtruth": str(seq_gt[seq]), "poses": len(gt), "frame": gt.frame,
@@ -134,7 +136,7 @@ def run_eval(*, gt_opts, estimates, results_root, gt_root, sequence_name, align,
         else:
             method, why = settings.align, "--align"
         try:
-            est = read_trajectory(sp.path, name=sp.method)
+            est = read_trajectory(sp.path, name=sp.method, allow_jumps=allow_jumps)
             r = evaluate_pair(gt, est, settings, method, method=sp.method, sequence=sp.sequence, trial=sp.trial,
                               T_B_C0=T, gt_raw=gt_raw)
         except DataError as exc:

@@ -224,8 +224,12 @@ def _parse(path: Path):
     raise DataError(path, f"has {k} columns per row; expected TUM (8), EuRoC csv (>= 8, comma), KITTI (12) or KITTI with index (13)")
 
 
-def read_trajectory(path: str | Path, name: str | None = None, frame: str = "unknown") -> Trajectory:
+def read_trajectory(path: str | Path, name: str | None = None, frame: str = "unknown",
+                    allow_jumps: bool = False) -> Trajectory:
     """Read any supported trajectory file, detecting the format from its content.
+
+    ``allow_jumps``: a position jump (see :func:`~gevi_cli.trajectory.validate.position_problem`) is
+    read as written, with a warning also kept in ``meta["allowed_jumps"]``, instead of refused.
 
     KITTI files carry no stamps: ``t_ns`` is then the frame index times 0.1 s and ``indexed`` is set.
     TUM and EuRoC columns are taken from the header when it names every column (``# timestamp tx ty
@@ -235,6 +239,8 @@ def read_trajectory(path: str | Path, name: str | None = None, frame: str = "unk
     fmt, headers, tok, lines, _ = _parse(path)
     name = name if name is not None else path.stem
     warnings: list[str] = []
+    allowed: list[str] = []
+    checks = {"warnings": warnings, "allow_jumps": allow_jumps, "allowed": allowed}
     if fmt in ("kitti", "kitti-idx"):
         if fmt == "kitti-idx":
             index = _kitti_index(tok[:, 0], path, lines)
@@ -245,7 +251,7 @@ def read_trajectory(path: str | Path, name: str | None = None, frame: str = "unk
         M = values.reshape(-1, 3, 4)
         R, t = M[:, :, :3], M[:, :, 3]
         t_ns = index * KITTI_NOMINAL_PERIOD_NS
-        validate_rows(path, lines, t_ns, t, rotations=R, warnings=warnings)
+        validate_rows(path, lines, t_ns, t, rotations=R, **checks)
         traj = Trajectory.from_rotations(t_ns, _nearest_rotations(R), t, frame=frame, indexed=True, name=name)
     else:
         cols = _header_columns(headers, tok.shape[1]) or _default_columns(fmt, headers)
@@ -255,9 +261,9 @@ def read_trajectory(path: str | Path, name: str | None = None, frame: str = "unk
         order = [cols[r] for r in ("px", "py", "pz", "qw", "qx", "qy", "qz")]
         values = _to_float(tok[:, order], path, lines, order)
         pos, q_wxyz = values[:, 0:3], values[:, 3:7]
-        q_wxyz = validate_rows(path, lines, t_ns, pos, quat_wxyz=q_wxyz, warnings=warnings)
+        q_wxyz = validate_rows(path, lines, t_ns, pos, quat_wxyz=q_wxyz, **checks)
         traj = Trajectory(t_ns, pos, q_wxyz, frame=frame, name=name)
-    traj.meta.update({"path": str(path), "format": fmt, "warnings": warnings})
+    traj.meta.update({"path": str(path), "format": fmt, "warnings": warnings, "allowed_jumps": allowed})
     return traj
 
 

@@ -3,7 +3,9 @@
 Everything here raises :class:`gevi_cli.errors.DataError` with ``file:line`` so a user can open the
 file at the bad row.  Quaternions a little off unit norm (files written with 4-6 decimals) are
 renormalized with a warning; stamps must strictly increase; positions must be finite and plausible
-(see :func:`absurd_row` for what "plausible" means: relative to the trajectory itself).
+(:func:`position_problem`: within :data:`MAX_ABS_POSITION_M` of the origin, and without a jump that
+:func:`persistent_jump_row` or :func:`absurd_row` finds relative to the trajectory's own steps).
+Row numbers in messages are the file's line numbers, 1-based, as an editor shows them.
 """
 from __future__ import annotations
 
@@ -17,6 +19,13 @@ MAX_STEP_RATIO = 1.0e4
 MAX_EXTENT_RATIO = 100.0
 #: Steps under this are never corrupt jumps (a few metres is always a possible move).
 MIN_JUMP_M = 100.0
+#: No Earth-fixed frame puts a pose farther from its origin (ECEF |p| ~6.4e6 m, UTM northings < 1e7 m,
+#: even a geostationary orbit is at 4.2e7 m): a coordinate beyond this is corrupt in every format.
+MAX_ABS_POSITION_M = 1.0e8
+#: A step this many times the median of the steps just before it (and over MIN_JUMP_M) is a jump ...
+PERSISTENT_STEP_RATIO = 1.0e4
+#: ... where "just before" is at most this many steps.
+PERSISTENT_WINDOW = 100
 QUAT_NORM_TOLERANCE = 1e-3
 #: A quaternion whose norm is off by more than this factor is not a rounding problem: a corrupt row.
 QUAT_NORM_REFUSE_FACTOR = 10.0
@@ -67,6 +76,67 @@ def absurd_row(positions: np.ndarray) -> tuple[int, float, float] | None:
     return row, float(steps[s]), typical
 
 
+def far_row(positions: np.ndarray) -> int | None:
+    """The first row farther than :data:`MAX_ABS_POSITION_M` (m) from the origin, or None."""
+    far = np.linalg.norm(positions, axis=1) > MAX_ABS_POSITION_M
+    return int(np.argmax(far)) if far.any() else None
+
+
+def persistent_jump_row(positions: np.ndarray) -> tuple[int, float, float] | None:
+    """The first row reached by a jump as ``(row, jump m, typical step m)``, or None.
+
+    A step is a jump when it is longer than :data:`MIN_JUMP_M` (100 m) and :data:`PERSISTENT_STEP_RATIO`
+    (1e4) times the median of the (up to :data:`PERSISTENT_WINDOW`) steps before it (floored at 1 mm).
+    Only the part *before* the step sets its scale, so the rule holds when the rows after it are
+    corrupt too, however many (a tail multiplied by 1e9, a frame offset added from some row on):
+    :func:`absurd_row`'s comparison with the whole file is blind there.  The reported row is the one
+    the jump reaches, the first that differs.  Speeds change smoothly: a car's 10 Hz steps (~1 m)
+    would need a 10 km step, a 200 Hz ground truth (~5 mm steps) a 100 m one.
+    """
+    steps = np.linalg.norm(np.diff(positions, axis=0), axis=1)
+    candidates = np.flatnonzero(steps > MIN_JUMP_M)
+    candidates = candidates[candidates >= 1]  # the first step has nothing before it
+    if len(candidates) == 0:
+        return None
+    before = np.concatenate([np.full(PERSISTENT_WINDOW, np.nan), steps])
+    windows = np.lib.stride_tricks.sliding_window_view(before, PERSISTENT_WINDOW)
+    for chunk in np.array_split(candidates, -(-len(candidates) // 4096)):  # bounded memory, stop early
+        typical = np.maximum(np.nanmedian(windows[chunk], axis=1), 1e-3)
+        jump = steps[chunk] > PERSISTENT_STEP_RATIO * typical
+        if jump.any():
+            k = int(np.argmax(jump))
+            return int(chunk[k]) + 1, float(steps[chunk[k]]), float(typical[k])
+    return None
+
+
+def position_problem(positions: np.ndarray) -> tuple[int, str, bool] | None:
+    """The first implausible row as ``(row, what is wrong, is a jump)``, or None (positions in m).
+
+    Checked in order: a position beyond :data:`MAX_ABS_POSITION_M` (never allowed), a jump of
+    :func:`persistent_jump_row`, a glitch of :func:`absurd_row` on the rows before that jump (a
+    glitch row or a bad first row is found there).  ``is a jump``: what ``--allow-jumps`` lets through.
+    """
+    far = far_row(positions)
+    if far is not None:
+        dist = float(np.linalg.norm(positions[far]))
+        return far, (f"position {_fmt_xyz(positions[far])} m is not plausible: it is {dist:.3g} m from the origin, "
+                     "farther than any Earth-fixed frame reaches (UTM, ECEF: < 1e7 m; limit "
+                     f"{MAX_ABS_POSITION_M:.3g} m); corrupt row?"), False
+    persistent = persistent_jump_row(positions)
+    end = persistent[0] if persistent is not None else len(positions)
+    glitch = absurd_row(positions[:end])
+    if glitch is not None:
+        r, jump, typical = glitch
+        return r, (f"position {_fmt_xyz(positions[r])} m is not plausible: it is {jump:.6g} m from its neighbour "
+                   f"while the typical step is {typical:.3g} m (position jumps; corrupt row?)"), True
+    if persistent is not None:
+        r, jump, typical = persistent
+        return r, (f"position {_fmt_xyz(positions[r])} m is not plausible: it is {jump:.6g} m from the previous row "
+                   f"while the steps before it are typically {typical:.3g} m (position jumps: a corrupt row, or "
+                   "corrupt rows from here on?)"), True
+    return None
+
+
 def duplicate_stamp_mask(path, lines, t_ns, warnings) -> np.ndarray:
     """Rows to keep: the first of each run of equal stamps.
 
@@ -85,10 +155,13 @@ def duplicate_stamp_mask(path, lines, t_ns, warnings) -> np.ndarray:
     return keep
 
 
-def validate_rows(path, lines, t_ns, positions, quat_wxyz=None, rotations=None, warnings=None):
+def validate_rows(path, lines, t_ns, positions, quat_wxyz=None, rotations=None, warnings=None,
+                  allow_jumps=False, allowed=None):
     """Check stamps, positions and orientation rows; return the (renormalized) quaternions.
 
     Stamps must not decrease (equal stamps are removed beforehand by :func:`duplicate_stamp_mask`).
+    Positions: see :func:`position_problem`; with ``allow_jumps`` a jump is not an error but a
+    warning, also appended to ``allowed`` (a list) when given.
 
     Args:
         path: file the rows came from (for messages); lines: (n,) 1-based line numbers.
@@ -114,11 +187,16 @@ def validate_rows(path, lines, t_ns, positions, quat_wxyz=None, rotations=None, 
         r = int(np.argmax(dt < 0)) + 1
         fail(r, f"timestamp {t_ns[r]} ns goes back in time (previous row has {t_ns[r - 1]} ns); rows must be sorted")
 
-    absurd = absurd_row(positions)
-    if absurd is not None:
-        r, jump, typical = absurd
-        fail(r, f"position {_fmt_xyz(positions[r])} m is not plausible: it is {jump:.6g} m from its neighbour "
-                f"while the typical step is {typical:.3g} m (position jumps; corrupt row?)")
+    problem = position_problem(positions)
+    if problem is not None:
+        r, what, is_jump = problem
+        if not (is_jump and allow_jumps):
+            fail(r, what + ("" if not is_jump else "; if the file really jumps, gevi convert/eval --allow-jumps "
+                                                    "read it as written"))
+        note = f"{path}:{lines[r]}: {what}; read as written (--allow-jumps)"
+        warnings.append(note)
+        if allowed is not None:
+            allowed.append(note)
 
     if rotations is not None:
         err = np.abs(np.einsum("nij,nkj->nik", rotations, rotations) - np.eye(3)).max(axis=(1, 2))

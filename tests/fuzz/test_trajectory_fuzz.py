@@ -19,11 +19,13 @@ from hypothesis import strategies as st
 from gevi_cli.errors import DataError, GeviError
 from gevi_cli.trajectory import Trajectory, read_trajectory, write_trajectory
 from gevi_cli.trajectory.formats import format_header, format_rows
+from gevi_cli.trajectory.validate import MAX_ABS_POSITION_M
 
 FORMATS = ("tum", "euroc", "kitti", "kitti-idx")
 BENIGN = ("none", "bom", "crlf", "bom+crlf", "whitespace", "blank-lines")
-MUTATIONS = BENIGN + ("truncate", "nonfinite", "text-token", "glitch", "absurd-rotation", "duplicate", "swap-rows", "swap-columns",
-                      "drop-column", "delimiter", "empty", "header-only", "garbage")
+MUTATIONS = BENIGN + ("truncate", "nonfinite", "text-token", "glitch", "persistent-jump", "most-rows-corrupt",
+                      "absurd-rotation", "duplicate", "swap-rows", "swap-columns", "drop-column", "delimiter", "empty",
+                      "header-only", "garbage")
 
 
 def _position_columns(fmt: str) -> list[int]:
@@ -64,6 +66,20 @@ class Case:
     def text(self, sep: str | None = None, newline: str = "\n") -> str:
         sep = sep or self.sep
         return newline.join(self.header + [sep.join(r) for r in self.rows]) + newline
+
+
+def rng_unit(seed: int) -> np.ndarray:
+    """A random unit vector (3,)."""
+    v = np.random.default_rng(seed).normal(size=3)
+    return v / np.linalg.norm(v)
+
+
+def _set_positions(case: Case, positions: np.ndarray, rows) -> None:
+    """Write ``positions`` (m) of ``rows`` into the case's position columns (exact repr text)."""
+    cols = _position_columns(case.fmt)
+    for r in rows:
+        for axis in range(3):
+            case.rows[r][cols[axis]] = repr(float(positions[r, axis]))
 
 
 def _mutate(data, case: Case, traj: Trajectory, kind: str):
@@ -109,10 +125,34 @@ def _mutate(data, case: Case, traj: Trajectory, kind: str):
         jump = 10.0 ** data.draw(st.integers(6, 12)) * (1.0 + extent) * data.draw(st.sampled_from([1, -1]))
         value = traj.positions[r, axis] + jump
         case.rows[r][_position_columns(case.fmt)[axis]] = repr(float(value))
-        if n < 3:  # two poses: no rest of the trajectory to compare with; the file's numbers are read
+        if n < 3 and abs(value) <= MAX_ABS_POSITION_M:
+            # two poses: no rest of the trajectory to compare with; the file's numbers are read
             expected = traj.positions.copy()
             expected[r, axis] = value
             return case.text().encode(), {"positions": expected}
+        return case.text().encode(), {"error_line": case.line_of(r), "message": "not plausible"}
+    if kind == "persistent-jump":
+        # from row r on, every row is moved by one big offset: the jump persists (a frame offset added
+        # to the rest of the file), however many rows follow; refused at r, the first moved row
+        if n < 3:
+            return case.text().encode(), {"same": True}
+        r = data.draw(st.integers(2, n - 1))
+        before = np.linalg.norm(np.diff(traj.positions[:r], axis=0), axis=1).max()
+        direction = rng_unit(data.draw(st.integers(0, 2**32 - 1)))
+        jump = direction * (1e5 * (before + 1e-3) + 1e3)  # far beyond the steps before it, |p| < 1e8 m
+        moved = traj.positions.copy()
+        moved[r:] += jump
+        _set_positions(case, moved, range(r, n))
+        return case.text().encode(), {"error_line": case.line_of(r), "message": "not plausible"}
+    if kind == "most-rows-corrupt":
+        # issue 35's file: one coordinate multiplied by 1e9..1e12 from row r to the end (at least half
+        # the rows); the rule relative to the whole file cannot see it, the absolute bound does
+        r, axis = data.draw(st.integers(0, n // 2)), data.draw(st.integers(0, 2))
+        factor = 10.0 ** data.draw(st.integers(9, 12))
+        factor = max(factor, 2 * MAX_ABS_POSITION_M / abs(traj.positions[r, axis]))  # row r itself is beyond 1e8 m
+        moved = traj.positions.copy()
+        moved[r:, axis] *= factor
+        _set_positions(case, moved, range(r, n))
         return case.text().encode(), {"error_line": case.line_of(r), "message": "not plausible"}
     if kind == "absurd-rotation":
         # a quaternion component (or rotation entry) 20..1e6 off: a corrupt row, not a rounding error
@@ -220,6 +260,22 @@ def test_mutated_trajectory_files(fmt, traj, kind, data):
     raw, expect = _mutate(data, case, traj, kind)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"traj.{'csv' if fmt == 'euroc' else 'txt'}"
+        path.write_bytes(raw)
+        _check(path, raw, traj, fmt, expect)
+
+
+@pytest.mark.parametrize("kind", ["persistent-jump", "most-rows-corrupt"])
+@pytest.mark.parametrize("fmt", FORMATS)
+@FUZZ
+@given(traj=trajectories(min_len=3), data=st.data())
+def test_corrupt_tails_are_refused_at_their_first_row(fmt, kind, traj, data):
+    """Issue 35: a jump that persists to the end, and a tail of most rows scaled by 1e9..1e12, are
+    refused at the first corrupt row (the sampled mutations above draw them too, among the others)."""
+    case = Case(traj, fmt)
+    raw, expect = _mutate(data, case, traj, kind)
+    assert "error_line" in expect
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "traj.txt"
         path.write_bytes(raw)
         _check(path, raw, traj, fmt, expect)
 
