@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gevi_cli.errors import GeviError
+from gevi_cli.errors import DataError, GeviError
 
 TRAJ_EXTS = {".txt", ".csv", ".tum", ".kitti", ".log", ".traj", ""}
 HINT_FILES = ("config.yaml", "meta.yaml", "meta.json", "eval_cfg.yaml")
@@ -301,6 +301,55 @@ def load_groundtruth(path: Path, gt_frame: str = "body", allow_jumps: bool = Fal
     if not path.exists():
         raise GeviError(path, "no such ground-truth file or dataset folder")
     return read_trajectory(path, name="groundtruth", frame=gt_frame, allow_jumps=allow_jumps), None
+
+
+def run_sequence_times(run_folder: Path) -> Path | None:
+    """The ``times.txt`` of the KITTI sequence a `gevi run` folder ran on, or None when it is not such a
+    folder (no ``status.json`` + ``config.yaml`` of a run with ``kind: kitti``).
+
+    The run's ``config.yaml`` names the sequence as given on the command line (a relative path is
+    relative to where the run was started); a sequence that is no longer there is an error.
+    """
+    config = Path(run_folder) / "config.yaml"
+    if not ((Path(run_folder) / "status.json").is_file() and config.is_file()):
+        return None
+    from gevi_cli.datasets.yamlio import load_yaml
+
+    doc = load_yaml(config, empty_ok=True, what="run configuration")
+    if not isinstance(doc, dict) or doc.get("kind") != "kitti" or not doc.get("sequence"):
+        return None
+    seq = Path(str(doc["sequence"]))
+    candidates = [seq / "times.txt"] + sorted(seq.glob("sequences/*/times.txt"))  # a dataset root of one sequence
+    times = next((c for c in candidates if c.is_file()), None)
+    if times is None:
+        raise GeviError(config, f"its KITTI sequence {seq} has no times.txt here (moved, or a relative path from "
+                                "another folder): cannot stamp a KITTI ground truth to compare with this run; "
+                                "give the ground truth with stamps (TUM) or the sequence folder")
+    return times
+
+
+def stamp_kitti_groundtruth(gt, times: Path):
+    """The KITTI (unstamped) ground truth ``gt`` stamped with a sequence's ``times.txt`` (s -> ns).
+
+    Row i of a KITTI file is frame i (a kitti-idx row carries its frame index), and frame i happened at
+    line i of ``times.txt``: so a plain KITTI file must have exactly one row per time, and a kitti-idx
+    file no index past the last time; anything else is refused (the files are of different sequences).
+    """
+    from gevi_cli.datasets.kitti import read_times
+    from gevi_cli.trajectory import Trajectory
+    from gevi_cli.trajectory.trajectory import KITTI_NOMINAL_PERIOD_NS
+
+    stamps = read_times(Path(times))
+    where = gt.meta.get("path") or "ground truth"
+    frames = gt.t_ns // KITTI_NOMINAL_PERIOD_NS
+    if gt.meta.get("format") == "kitti" and len(gt) != len(stamps):
+        raise DataError(where, f"has {len(gt)} poses but {times} lists {len(stamps)} frames; row i of a KITTI file is "
+                               "frame i, so they must match (a ground truth of another sequence, or cut short?)")
+    if frames[-1] >= len(stamps):
+        raise DataError(where, f"has frame index {int(frames[-1])} but {times} lists only {len(stamps)} frames "
+                               "(a ground truth of another sequence?)")
+    meta = dict(gt.meta, stamped_from=str(times))
+    return Trajectory(stamps[frames], gt.positions, gt.quat_wxyz, frame=gt.frame, name=gt.name, meta=meta)
 
 
 def _is_dataset(path: Path) -> bool:

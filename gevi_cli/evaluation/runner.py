@@ -85,6 +85,26 @@ def collect_specs(gt_opts, estimates, results_root, gt_root, sequence_name):
     return specs, seq_gt
 
 
+def _stamped_for_run(gt, gt_raw, est, est_path: Path, cache: dict, info: dict):
+    """(ground truth, its raw KITTI poses) to evaluate ``est`` with.
+
+    A KITTI ground truth has no stamps, a `gevi run` estimate has the sequence's: when the estimate is
+    the primary trajectory of a run folder of that KITTI sequence, the ground truth is stamped with the
+    sequence's ``times.txt`` (row i = frame i), the same stamps `gevi run` gives it without ``--gt``.
+    Anything else is returned unchanged (the association then explains a stamped/unstamped mix).
+    """
+    if not gt.indexed or est.indexed:
+        return gt, gt_raw
+    times = inp.run_sequence_times(Path(est_path).parent)
+    if times is None:
+        return gt, gt_raw
+    key = (id(gt), times)
+    if key not in cache:
+        cache[key] = inp.stamp_kitti_groundtruth(gt, times)
+        info.setdefault("stamped_from", []).append(str(times))
+    return cache[key], None
+
+
 def run_eval(*, gt_opts, estimates, results_root, gt_root, sequence_name, align, n_align, max_diff, t_offset,
              rpe_delta, rpe_unit, min_coverage, est_frame, gt_frame, t_b_c0, kitti, plots, out, overwrite,
              keep_going, quiet, only_methods=(), echo=print, allow_jumps=False):
@@ -121,7 +141,7 @@ def run_eval(*, gt_opts, estimates, results_root, gt_root, sequence_name, align,
         for w in gt.meta.get("warnings", []):
             warn(w)
 
-    results = []
+    results, stamped = [], {}
     for sp in specs:
         label = f"{sp.method}/{sp.sequence}" + (f"/{sp.trial}" if sp.trial else "")
         if sp.path is None:
@@ -137,8 +157,9 @@ def run_eval(*, gt_opts, estimates, results_root, gt_root, sequence_name, align,
             method, why = settings.align, "--align"
         try:
             est = read_trajectory(sp.path, name=sp.method, allow_jumps=allow_jumps)
-            r = evaluate_pair(gt, est, settings, method, method=sp.method, sequence=sp.sequence, trial=sp.trial,
-                              T_B_C0=T, gt_raw=gt_raw)
+            pair_gt, pair_raw = _stamped_for_run(gt, gt_raw, est, sp.path, stamped, seq_info[sp.sequence])
+            r = evaluate_pair(pair_gt, est, settings, method, method=sp.method, sequence=sp.sequence, trial=sp.trial,
+                              T_B_C0=T, gt_raw=pair_raw)
         except DataError as exc:
             if exc.message.startswith("contains no pose rows"):
                 r = failed(sp.method, sp.sequence, sp.trial, sp.path, "no valid poses")

@@ -276,6 +276,9 @@ def execute(req: RunRequest, echo=print) -> int:
     if kind != "ov2slam-tracks":
         _check_image_size(source, req.start, req.sequence)
     frontend, odometry = build(source, kind, cfg, req.method, warn=warn, start=req.start)
+    # read (and check) the ground truth before the run folder exists: a KITTI --gt whose rows do not match
+    # the sequence's times.txt is refused in one line without leaving an empty run behind
+    gt_traj = getattr(source, "groundtruth", None)
     seq_name = source.name
     run_dir = make_run_dir(req.out, Path(req.results_root), req.method, seq_name)
     sensor = "stereo-inertial" if method == "gevi" else "stereo"
@@ -285,7 +288,6 @@ def execute(req: RunRequest, echo=print) -> int:
     (run_dir / "config.yaml").write_text(yaml.safe_dump(config_doc, sort_keys=False))
     kitti_rows = kind in ("kitti", "ov2slam-tracks")
     # KITTI ground truth without stamps is matched by frame index: then the KITTI rows are primary
-    gt_traj = getattr(source, "groundtruth", None)
     indexed_gt = kitti_rows and gt_traj is not None and gt_traj.indexed
     status = RunStatus(method=req.method, stride=req.stride, primary=PRIMARY_KITTI if indexed_gt else PRIMARY, sequence=seq_name, gevi_version=__version__,
                        command=" ".join(["gevi"] + sys.argv[1:]), started=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
