@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from gevi_cli.frontend.types import FeatureObs, RectifiedStereo, StereoObs
+from gevi_cli.frontend.types import FeatureObs, Prediction, RectifiedStereo, StereoObs
 
 
 class FrontEnd(Protocol):
@@ -20,10 +20,19 @@ class FrontEnd(Protocol):
 
     camera: RectifiedStereo
 
-    def track(self, frame, rotation=None) -> FeatureObs:
+    def track(self, frame, rotation=None, predicted=None) -> FeatureObs:
         """Left-image features of ``frame`` with the ids they had in earlier frames.  ``rotation``:
         the back end's predicted rotation ``R_cp`` since the previous frame (rectified left camera,
-        previous -> current coordinates) or None; a front end may use it as a tracking prior."""
+        previous -> current coordinates) or None; ``predicted``: a :class:`Prediction` of the pixels
+        and patch scales of some features in ``frame``, or None.  A front end may use both as tracking priors."""
+
+    def reacquire(self, frame, predicted=None, radius_px=None, keep_tracks=False) -> FeatureObs | None:
+        """After ``track(frame)``: the frame's features with the last keyframe's found again by
+        descriptor (near ``predicted`` pixels where given, within ``radius_px``; with ``keep_tracks``
+        only those LK lost), or None when it cannot.  A proposal: the front end's state is unchanged until ``adopt``."""
+
+    def adopt(self, frame, obs) -> None:
+        """Make ``obs``, what ``reacquire(frame)`` returned, the front end's features of ``frame``."""
 
     def keyframe(self, frame) -> StereoObs:
         """Make ``frame`` a keyframe: (re-)detect where features are missing and match left->right."""
@@ -32,4 +41,4 @@ class FrontEnd(Protocol):
         """None: the back end's keyframe rule decides; True/False: the source dictates it."""
 
 
-__all__ = ["FrontEnd", "FeatureObs", "StereoObs", "RectifiedStereo"]
+__all__ = ["FrontEnd", "FeatureObs", "Prediction", "StereoObs", "RectifiedStereo"]

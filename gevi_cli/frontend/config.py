@@ -70,6 +70,36 @@ class FrontendConfig:
     rose 9 % (RPE -6 %), GeVI's pool-hard renders lost 7 %, and it costs ~4 ms per frame at KITTI
     size, the kitti-like pipeline at 2.0-2.07x the LK floor against the 2x target (method.md 12.1)."""
 
+    predict: bool = True
+    """Start each feature's LK where the back end's motion prediction puts its keyframe point (constant
+    velocity; GeVI's rotation from the gyro) instead of at its previous pixel."""
+
+    lk_scale_step: float = 1.15
+    """Predicted features whose patch grows or shrinks by more than about half this factor between
+    frames are tracked from a resized previous image, in groups of this scale step
+    (:func:`~gevi_cli.frontend.klt.track_lk_scaled`)."""
+
+    reacquire: bool = True
+    """Find the keyframe's features again by ORB descriptors (:mod:`~gevi_cli.frontend.reacquire`)
+    when a frame's pose cannot be found from its LK tracks (then retry before bridging the frame), and
+    near their predicted pixels when LK kept fewer than ``keyframe.min_tracked`` of them (top-up)."""
+
+    reacquire_features: int = 2000
+    """ORB detections per image searched for the keyframe's features (the strongest by Harris score)."""
+
+    reacquire_fast_threshold: int = 7
+    """FAST threshold (grey levels) of those detections: low, so that the count, not the threshold,
+    decides which corners are kept in a low-contrast image."""
+
+    reacquire_radius_px: float = 40.0
+    """Guided search: a feature with a predicted pixel matches only detections this close to it (px)."""
+
+    reacquire_max_hamming: int = 64
+    """Largest Hamming distance (of 256 bits) of a descriptor match."""
+
+    reacquire_ratio: float = 0.8
+    """Lowe's ratio test: the best match must be closer than this times the second best."""
+
     fb_max_px: float = 0.5
     """Forward-backward check: tracking back must land within this distance (px) of the start."""
 

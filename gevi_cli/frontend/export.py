@@ -34,9 +34,9 @@ class ExportFrontEnd:
         self.use_outlier_flags = bool(use_outlier_flags)
         self.timings: dict[str, float] = {"read": float(getattr(export, "read_seconds", 0.0))}
 
-    def track(self, frame: TrackFrame, rotation=None) -> FeatureObs:
+    def track(self, frame: TrackFrame, rotation=None, predicted=None) -> FeatureObs:
         """The frame's tracked left-image features (ids as in the export's stereo matches); the
-        rotation prior is not needed (the tracks are already made)."""
+        rotation and pixel priors are not needed (the tracks are already made)."""
         obs = frame.obs
         if self.use_outlier_flags and frame.outlier.any():
             keep = ~frame.outlier
@@ -50,6 +50,14 @@ class ExportFrontEnd:
                             f"frame {frame.index} is not a keyframe of the export (it has no stereo matches); "
                             "with exported tracks the keyframes are the export's (keyframe_decision)")
         return frame.stereo
+
+    def reacquire(self, frame: TrackFrame, predicted=None, radius_px=None, keep_tracks=False) -> None:
+        """Exported tracks cannot be re-matched (no images): None."""
+        return None
+
+    def adopt(self, frame: TrackFrame, obs: FeatureObs) -> None:
+        """Never called: :meth:`reacquire` offers nothing to adopt."""
+        raise NotImplementedError("exported tracks cannot be re-acquired")
 
     def keyframe_decision(self, frame: TrackFrame) -> bool:
         """True exactly for the export's keyframes."""

@@ -24,16 +24,17 @@ import numpy as np
 from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.frontend.config import FrontendConfig
 from gevi_cli.estimators.lie import log_so3
+from gevi_cli.frontend import reacquire
 from gevi_cli.frontend.affine import PatchTemplates
 from gevi_cli.frontend.derotate import apply_homography, derotate, fit_inplane, rotation_homography
 from gevi_cli.frontend.grid import GridDetector
-from gevi_cli.frontend.klt import Pyramid, build_pyramid, in_image, track_lk
+from gevi_cli.frontend.klt import Pyramid, build_pyramid, in_image, track_lk, track_lk_scaled
 from gevi_cli.frontend.rectify import Rectifier
 from gevi_cli.frontend.shading import remove_shading
 from gevi_cli.frontend.stereo import match_stereo
-from gevi_cli.frontend.types import FeatureObs, RectifiedStereo, StereoObs
+from gevi_cli.frontend.types import FeatureObs, Prediction, RectifiedStereo, StereoObs
 
-STAGES = ("rectify", "pyramid", "derotate", "lk", "affine", "detect", "stereo")
+STAGES = ("rectify", "pyramid", "derotate", "lk", "affine", "detect", "stereo", "reacquire")
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -66,18 +67,67 @@ class ImageFrontEnd:
         self._step: tuple[np.ndarray, np.ndarray] | None = None  # the last step's tracks (before, after)
         self._templates: PatchTemplates | None = None  # the last keyframe's patches (affine re-alignment)
         self._f32: tuple[Pyramid, np.ndarray] | None = None  # (pyramid, its image as float32)
+        self._kf_pyr: Pyramid | None = None  # the last keyframe's rectified left image
+        self._kf_features: tuple[np.ndarray, np.ndarray] | None = None  # its stereo features (ids, pixels)
+        self._kf_patches: reacquire.KeyframePatches | None = None  # their ORB descriptors, made when first needed
         self.timings: dict[str, float] = dict.fromkeys(STAGES, 0.0)
 
     # -- protocol ---------------------------------------------------------------------------------
-    def track(self, frame, rotation: np.ndarray | None = None) -> FeatureObs:
+    def track(self, frame, rotation: np.ndarray | None = None, predicted: Prediction | None = None) -> FeatureObs:
         """Left features of ``frame`` (rectified pixels) with the ids they had before.
 
         ``rotation``: predicted ``R_cp`` (3, 3), previous rectified-left camera coordinates ->
         current ones (None: the rotation fitted to the last step's tracks); removed before LK when
-        ``cfg.derotate`` is on and it exceeds ``cfg.derotate_min_deg``."""
+        ``cfg.derotate`` is on and it exceeds ``cfg.derotate_min_deg``.  ``predicted``: the back end's
+        predicted pixels in ``frame`` of some features (their keyframe points seen from the predicted
+        pose); LK starts there instead of at the previous pixel."""
         self.timings = dict.fromkeys(STAGES, 0.0)
-        self._track(frame, rotation)
+        self._track(frame, rotation, predicted)
         return FeatureObs(self.ids, self.uv)
+
+    def reacquire(self, frame, predicted: Prediction | None = None, radius_px: float | None = None,
+                  keep_tracks: bool = False) -> FeatureObs | None:
+        """The last keyframe's features found again in ``frame`` (the frame ``track`` just ran on) by
+        ORB descriptors, guided by ``predicted`` pixels where given (:mod:`~gevi_cli.frontend.reacquire`),
+        within ``radius_px`` of them (default ``cfg.reacquire_radius_px``).
+
+        Each match is refined to sub-pixel by LK from the keyframe's image, started at the matched
+        detection with the patch scaled by the detection's pyramid scale, and kept only if that LK
+        passes its forward-backward check.  A feature LK had lost is tracked again; one LK still
+        holds keeps its LK pixel with ``keep_tracks`` (a top-up), else the re-found pixel replaces it
+        unless the two agree within ``cfg.fb_max_px`` x 4 px (LK has just failed the pose).  Returns the
+        frame's features with that done, or None when re-acquisition is off or there is no keyframe;
+        the front end's own features change only when the back end :meth:`adopt` s them."""
+        if not self.cfg.reacquire or self._kf_pyr is None or int(frame.t_ns) != self._t_ns:
+            return None
+        with self._timed("reacquire"):  # added to this frame's track() timings
+            if self._kf_patches is None:
+                self._kf_patches = reacquire.describe(self._kf_pyr.image, *self._kf_features, self.cfg)
+            ids, uv, scale = reacquire.match(self._kf_patches, self._left.image, self.cfg, predicted, radius_px)
+            order = np.argsort(self._kf_patches.ids)
+            kf_uv = self._kf_patches.uv[order[np.searchsorted(self._kf_patches.ids, ids, sorter=order)]]
+            uv, ok = track_lk_scaled(self._kf_pyr, self._left, kf_uv, self.cfg, uv, scale)
+            ids, uv = ids[ok], uv[ok]
+            _, i_state, i_new = np.intersect1d(self.ids, ids, assume_unique=True, return_indices=True)
+            agree = np.linalg.norm(self.uv[i_state] - uv[i_new], axis=1) <= 4 * self.cfg.fb_max_px
+            keep = np.ones(len(self.ids), bool)
+            fresh = np.ones(len(ids), bool)
+            if keep_tracks:
+                fresh[i_new] = False
+            else:
+                keep[i_state[~agree]] = False  # LK's track of a re-found feature went elsewhere: the descriptor wins
+                fresh[i_new[agree]] = False
+            all_ids = np.concatenate([self.ids[keep], ids[fresh]])
+            all_uv = np.concatenate([self.uv[keep], uv[fresh]])
+            order = np.argsort(all_ids, kind="stable")
+        return FeatureObs(_frozen(all_ids[order]), _frozen(all_uv[order]))
+
+    def adopt(self, frame, obs: FeatureObs) -> None:
+        """Make ``obs`` (what :meth:`reacquire` returned for ``frame``) the front end's features of ``frame``."""
+        if int(frame.t_ns) != self._t_ns:
+            raise ValueError("adopt: features of a frame other than the last tracked one")
+        self.ids, self.uv = obs.ids, obs.uv
+        self._step = None  # the last step's tracks no longer describe this frame's features
 
     def keyframe(self, frame) -> StereoObs:
         """Detect in empty cells (new ids), then stereo-match every current feature of ``frame``."""
@@ -100,6 +150,8 @@ class ImageFrontEnd:
         if ok.any():
             self._disparity_prior = float(np.median(self.uv[ok, 0] - uv_r[ok, 0]))
         self._stereo = StereoObs(_frozen(self.ids[ok]), _frozen(self.uv[ok]), _frozen(uv_r[ok]))
+        # what re-acquisition looks for later: the features with a stereo point, in this image
+        self._kf_pyr, self._kf_features, self._kf_patches = self._left, (self._stereo.ids, self._stereo.uv_left), None
         if self.cfg.affine:
             # the features with a stereo point only: they are what the pose and the BA's keyframe pairs use
             with self._timed("affine"):
@@ -143,7 +195,7 @@ class ImageFrontEnd:
         self.ids = _frozen(np.concatenate([self.ids, ids]))
         self.uv = _frozen(np.concatenate([self.uv, uv_new]))
 
-    def _track(self, frame, rotation: np.ndarray | None = None) -> int:
+    def _track(self, frame, rotation: np.ndarray | None = None, predicted: Prediction | None = None) -> int:
         """Bring the state to ``frame`` (idempotent per ``t_ns``); returns its stamp."""
         if frame is None:
             raise ValueError("frame is None")
@@ -161,14 +213,17 @@ class ImageFrontEnd:
             self._add(first)
         elif len(self.uv):
             H = self._derotation(rotation)
+            guess, has, scale = self._guesses(predicted)
             if H is None:
                 with self._timed("lk"):
-                    uv, ok = track_lk(self._left, pyr, self.uv, self.cfg)
+                    uv, ok = self._lk(pyr, guess, scale)
             else:
                 with self._timed("derotate"):
                     pyr_d = build_pyramid(derotate(pyr.image, H), self.cfg)
+                    if guess is not None:  # predicted pixels into the derotated image
+                        guess[has] = apply_homography(np.linalg.inv(H), guess[has])
                 with self._timed("lk"):
-                    uv, ok = track_lk(self._left, pyr_d, self.uv, self.cfg)
+                    uv, ok = self._lk(pyr_d, guess, scale)
                     uv = apply_homography(H, uv)  # (NaN stays NaN)
                     ok &= in_image(uv, pyr.shape)
             uv_ok = _frozen(uv[ok])
@@ -178,6 +233,31 @@ class ImageFrontEnd:
         if self.cfg.affine:
             self._align()
         return t_ns
+
+    def _lk(self, pyr, guess: np.ndarray | None, scale: np.ndarray | None):
+        """LK of the state's features from the previous image into ``pyr``, from the predicted pixels
+        and patch scales where there are any."""
+        if guess is None:
+            return track_lk(self._left, pyr, self.uv, self.cfg)
+        return track_lk_scaled(self._left, pyr, self.uv, self.cfg, guess, scale)
+
+    def _guesses(self, predicted: Prediction | None):
+        """LK start pixels: the predicted pixel where ``predicted`` has the feature (inside the image),
+        else the previous pixel; the mask of the predicted ones; their predicted patch scales (1
+        elsewhere).  (None, None, None) without a prediction."""
+        if predicted is None or not len(predicted):
+            return None, None, None
+        _, i_state, i_pred = np.intersect1d(self.ids, predicted.ids, assume_unique=True, return_indices=True)
+        inside = in_image(predicted.uv[i_pred], self._left.shape)
+        if not inside.any():
+            return None, None, None
+        guess = np.array(self.uv, dtype=np.float64)
+        guess[i_state[inside]] = predicted.uv[i_pred[inside]]
+        has = np.zeros(len(guess), bool)
+        has[i_state[inside]] = True
+        scale = np.ones(len(guess))
+        scale[i_state[inside]] = predicted.scale[i_pred[inside]]
+        return guess, has, scale
 
     def _derotation(self, rotation: np.ndarray | None) -> np.ndarray | None:
         """The homography (previous -> current pixels) to remove before LK: of the back end's

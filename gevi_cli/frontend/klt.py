@@ -96,3 +96,37 @@ def track_lk(pyr_prev: Pyramid, pyr_cur: Pyramid, uv_prev: np.ndarray, cfg: Fron
         ok[idx] = ok_back & (fb < cfg.fb_max_px)
     uv_cur[~ok] = np.nan
     return uv_cur, ok
+
+
+def track_lk_scaled(pyr_prev: Pyramid, pyr_cur: Pyramid, uv_prev: np.ndarray, cfg: FrontendConfig,
+                    uv_guess: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`track_lk` for features whose patch changes size between the images by ``scale`` (n,).
+
+    LK fits a translation of its window, so a patch that grew by 1.3x or more (a near point at a
+    large forward step: a fast car, a low frame rate) no longer matches and is lost or lands on a
+    look-alike.  The features are grouped by scale in steps of ``cfg.lk_scale_step`` (a factor); for
+    each group other than the unit one the previous image is resized by the group's scale (an affine
+    warp, the translation putting the group's features at their guesses on average) and the group is
+    tracked from that image, so LK sees patches of the right size.  A feature whose warped start falls
+    outside the image, or whose scaled track fails, keeps its plain :func:`track_lk` result.
+    """
+    uv_prev = np.asarray(uv_prev, np.float64).reshape(-1, 2)
+    guess = np.asarray(uv_guess, np.float64).reshape(-1, 2)
+    uv, ok = track_lk(pyr_prev, pyr_cur, uv_prev, cfg, guess)
+    step = np.log(float(cfg.lk_scale_step))
+    group = np.round(np.log(np.clip(np.asarray(scale, np.float64), 1e-3, 1e3)) / step)
+    h, w = pyr_cur.shape
+    for g in np.unique(group[np.isfinite(group) & (group != 0)]):
+        members = np.flatnonzero(group == g)
+        s = float(np.exp(g * step))
+        t = np.median(guess[members] - s * uv_prev[members], axis=0)
+        A = np.array([[s, 0.0, t[0]], [0.0, s, t[1]]])
+        src = s * uv_prev[members] + t
+        inside = in_image(src, (h, w))
+        if not inside.any():
+            continue
+        members, src = members[inside], src[inside]
+        warped = build_pyramid(cv2.warpAffine(pyr_prev.image, A, (w, h), flags=cv2.INTER_LINEAR), cfg)
+        uv_g, ok_g = track_lk(warped, pyr_cur, src, cfg, guess[members])
+        uv[members[ok_g]], ok[members[ok_g]] = uv_g[ok_g], True
+    return uv, ok

@@ -74,6 +74,20 @@ class FeatureObs:
 
 
 @dataclass(frozen=True)
+class Prediction:
+    """The back end's prediction of some features in the frame about to be tracked: ``ids`` (n,),
+    ``uv`` (n, 2) rectified-left pixels, ``scale`` (n,) how much larger their image patch appears than
+    in the previous frame (depth in the previous frame over predicted depth: > 1 when approaching)."""
+
+    ids: np.ndarray
+    uv: np.ndarray
+    scale: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+
+@dataclass(frozen=True)
 class StereoObs:
     """Keyframe stereo matches: ``ids`` (n,), ``uv_left``/``uv_right`` (n, 2) rectified pixels."""
 

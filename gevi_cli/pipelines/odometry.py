@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gevi_cli import estimators as est
-from gevi_cli.frontend import FrontEnd
+from gevi_cli.frontend import FeatureObs, FrontEnd, Prediction
 from gevi_cli.geometry import invert_pose
 from gevi_cli.pipelines.config import OdometryConfig
 from gevi_cli.pipelines.keyframe import Keyframe, make_keyframe
@@ -116,6 +116,8 @@ class KeyframeOdometry:
         self._ba_longest = 0  # frames in the longest window bundle-adjusted so far
         self.ba_rejected = 0
         self.fallbacks = 0  # frames whose 6-DOF pose step started from SQPnP instead of Bias-Eli
+        self.reacquired = 0  # frames tracked only after re-acquiring the keyframe's features by descriptor
+        self._moving = False  # a step has been tracked: self.velocity is a measured motion
 
     def frame_rng(self) -> np.random.Generator:
         """The generator for this frame's RANSAC draws, positioned at (seed, frame index)."""
@@ -133,7 +135,15 @@ class KeyframeOdometry:
         self.index += 1
         timings: dict[str, float] = {}
         t0 = time.perf_counter()
-        obs = self.frontend.track(frame, self.rotation_prior())
+        predicted = self.predicted_pixels()
+        obs = self.frontend.track(frame, self.rotation_prior(), predicted)
+        topped_up = False
+        if predicted is not None and np.isin(obs.ids, self.kf.ids).sum() < self.cfg.keyframe.min_tracked:
+            # few keyframe points left: those LK lost, searched for by descriptor near their predicted pixels
+            again = self.frontend.reacquire(frame, predicted, keep_tracks=True)
+            if again is not None and len(again) > len(obs):
+                self.frontend.adopt(frame, again)
+                obs, topped_up = again, True
         self.obs = obs  # the front end's features of this frame (ids, pixels), for what subclasses judge from them
         timings.update({f"fe_{k}": v for k, v in getattr(self.frontend, "timings", {}).items()})
         timings["frontend"] = time.perf_counter() - t0
@@ -144,8 +154,27 @@ class KeyframeOdometry:
             try:
                 T_ck, n_match, n_in, disp_px = self._track_against_kf(obs.ids, q_all, frame, timings)
                 res.n_matches, res.n_inliers = n_match, n_in
+                res.message = "topped up by re-acquisition" if topped_up else ""
             except TrackingFailure as err:
                 failure = str(err)
+                t1 = time.perf_counter()
+                again = self.frontend.reacquire(frame, predicted)
+                timings["fe_reacquire"] = timings.get("fe_reacquire", 0.0) + time.perf_counter() - t1
+                timings["frontend"] += time.perf_counter() - t1
+                if again is not None:
+                    # the keyframe's features found again by descriptor: the pose step once more on them
+                    q_again = self.camera.normalize(again.uv)
+                    try:
+                        T_ck, n_match, n_in, disp_px = self._track_against_kf(again.ids, q_again, frame, timings)
+                    except TrackingFailure as err2:
+                        failure = f"{failure}; after re-acquisition: {err2}"
+                    else:
+                        res.n_matches, res.n_inliers = n_match, n_in
+                        res.message, failure = f"re-acquired after: {failure}", ""
+                        self.frontend.adopt(frame, again)
+                        obs = self.obs = again
+                        q_all = q_again
+                        self.reacquired += 1
         elif self.index > 0:
             failure = "no keyframe to track against"
         if self.index == 0:
@@ -177,10 +206,41 @@ class KeyframeOdometry:
         if self.T_w_last is not None and res.status == OK:
             # re-orthonormalised: bridged poses are products of velocities, rounding must not grow
             self.velocity = _orthonormal(invert_pose(self.T_w_last) @ T_now)
+            self._moving = True
         self.T_w_last = T_now
         res.timings = timings
         self._tail = (frame, res)
         return res
+
+    def predicted_pixels(self) -> Prediction | None:
+        """Where the keyframe's points should appear in the frame about to be tracked (rectified-left
+        pixels) and how much larger than in the previous frame, seen from the predicted pose: the last
+        pose moved by the last tracked step (constant velocity), its rotation replaced by
+        :meth:`rotation_prior` where that gives one (GeVI: the gyro's).  None before the first tracked
+        step (no motion known yet) or without a keyframe."""
+        if (not self.cfg.frontend.predict or self.kf is None or self.T_w_last is None or not self._moving
+                or not len(self.kf)):
+            return None
+        step = self.velocity.copy()  # T_prev_cur
+        R_cp = self.rotation_prior()
+        if R_cp is not None:
+            step[:3, :3] = R_cp.T
+        T_pk = invert_pose(self.T_w_last) @ self.kf.T_w_k
+        return self._project(invert_pose(step) @ T_pk, T_pk)
+
+    def _project(self, T_ck: np.ndarray, T_pk: np.ndarray | None = None) -> Prediction:
+        """The keyframe's points (in front of the camera) as pixels of a frame whose pose is ``T_ck``,
+        with their patch scale against the previous frame of pose ``T_pk`` (1 where that is not given)."""
+        pc = self.kf.p @ T_ck[:3, :3].T + T_ck[:3, 3]
+        front = pc[:, 2] > self.cfg.triangulation.min_depth_m
+        xy = pc[front, :2] / pc[front, 2:]
+        c = self.camera
+        uv = np.column_stack([c.fx * xy[:, 0] + c.cx, c.fy * xy[:, 1] + c.cy])
+        scale = np.ones(len(uv))
+        if T_pk is not None:
+            z_prev = self.kf.p[front] @ T_pk[2, :3] + T_pk[2, 3]
+            scale = np.where(z_prev > 0, z_prev / pc[front, 2], 1.0)
+        return Prediction(self.kf.ids[front], uv, scale)
 
     def rotation_prior(self) -> np.ndarray | None:
         """Predicted rotation ``R_cp`` (previous -> current rectified-left camera coordinates) of the

@@ -18,7 +18,7 @@ from gevi_cli.pipelines.types import BRIDGED, INERTIAL
 from gevi_cli.run.folder import PoseStream, RunStatus, write_status
 
 #: timing.csv columns (ms); the front-end sub-stages are part of "frontend" and "keyframe".
-STAGES = ("read", "frontend", "fe_rectify", "fe_pyramid", "fe_derotate", "fe_lk", "fe_affine", "fe_detect", "fe_stereo", "verify", "noise", "pose",
+STAGES = ("read", "frontend", "fe_rectify", "fe_pyramid", "fe_derotate", "fe_lk", "fe_affine", "fe_detect", "fe_stereo", "fe_reacquire", "verify", "noise", "pose",
           "keyframe", "ba")
 
 

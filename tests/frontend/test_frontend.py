@@ -28,7 +28,8 @@ from gevi_cli.frontend.config import FrontendConfig
 from gevi_cli.frontend.grid import GridDetector, detect_grid
 from gevi_cli.frontend.derotate import apply_homography, fit_inplane
 from gevi_cli.frontend.image_frontend import STAGES, ImageFrontEnd
-from gevi_cli.frontend.klt import build_pyramid, track_lk
+from gevi_cli.frontend.klt import build_pyramid, track_lk, track_lk_scaled
+from gevi_cli.frontend.types import FeatureObs, Prediction
 from gevi_cli.frontend.rectify import Rectifier
 from gevi_cli.frontend.stereo import disparity_gate, hypotheses, match_stereo, refine_on_row
 
@@ -37,10 +38,10 @@ FINE = replace(CFG, cell_px=16)
 
 
 # --- synthetic -------------------------------------------------------------------------------------
-def texture(h: int, w: int, shift=(0.0, 0.0), seed: int = 0, turn: float = 0.0) -> np.ndarray:
+def texture(h: int, w: int, shift=(0.0, 0.0), seed: int = 0, turn: float = 0.0, zoom: float = 1.0) -> np.ndarray:
     """Band-limited random texture I(x - dx, y - dy), evaluated exactly (a sum of sinusoids), uint8;
-    ``turn`` (rad) rotates the content by that angle about the image centre (grey levels scaled as
-    for the unturned image, so that only the geometry differs)."""
+    ``turn`` (rad) rotates the content by that angle about the image centre, ``zoom`` magnifies it
+    about the centre (grey levels scaled as for the unturned image, so that only the geometry differs)."""
     rng = np.random.default_rng(seed)
     k = 60
     ang = rng.uniform(0, np.pi, k)
@@ -54,6 +55,9 @@ def texture(h: int, w: int, shift=(0.0, 0.0), seed: int = 0, turn: float = 0.0) 
 
     img = waves(x, y)
     scale = 110 / np.abs(img).max()
+    if zoom != 1.0:
+        cx, cy = (w - 1) / 2, (h - 1) / 2
+        img = waves(cx + (x - cx) / zoom, cy + (y - cy) / zoom)
     if turn:
         c, s, cx, cy = np.cos(turn), np.sin(turn), (w - 1) / 2, (h - 1) / 2
         img = waves(c * (x - cx) + s * (y - cy) + cx, -s * (x - cx) + c * (y - cy) + cy)
@@ -124,6 +128,96 @@ def test_without_a_prior_the_last_steps_image_rotation_is_removed():
     truth = c + d @ np.array([[np.cos(step), -np.sin(step)], [np.sin(step), np.cos(step)]]).T
     assert len(i2) > 50
     assert np.percentile(np.linalg.norm(obs[2].uv[i2] - truth, axis=1), 95) < 0.05
+
+
+def test_predicted_lk_keeps_a_motion_plain_lk_loses():
+    """A 60 px step is beyond the capture range of a 21 px window over 3 pyramid levels (~40 px at
+    the coarsest level's half window, less on a texture with 10-80 px periods): LK from the previous
+    pixel finds no track within 0.1 px.  Started from a prediction 2 px (std) off, the same LK is
+    as precise as on a small step (the 0.1 px of a 2-px-error start after convergence to lk_eps)."""
+    h, w, shift = 240, 320, np.array([60.0, 0.0])
+    a, b = texture(h, w), texture(h, w, tuple(shift))
+    uv = detect_grid(a, None, CFG)
+    truth = uv + shift
+    visible = truth[:, 0] < w - 1
+    assert visible.sum() > 40
+    pa, pb = build_pyramid(a, CFG), build_pyramid(b, CFG)
+    plain, ok_plain = track_lk(pa, pb, uv, CFG)
+    guess = truth + np.random.default_rng(0).normal(0.0, 2.0, truth.shape)
+    pred, ok_pred = track_lk(pa, pb, uv, CFG, guess)
+    good = lambda u, ok: ok & visible & (np.linalg.norm(u - truth, axis=1) < 0.1)
+    assert good(plain, ok_plain).sum() <= 0.1 * visible.sum()
+    assert good(pred, ok_pred).sum() >= 0.9 * visible.sum()
+
+
+def test_scaled_lk_tracks_a_patch_that_grew():
+    """The image magnified 1.4x about its centre (a near point approached at a large forward step):
+    a translation-only LK started at the right pixel loses most features or lands > 1 px off; with
+    the predicted scale, LK tracks from the previous image resized by the scale group's 1.15^2 and
+    the 6 % left over shifts the fit by a fraction of a pixel (|1.4/1.3225 - 1| x the 10 px
+    half window = 0.6 px at the window's edge, ~half that for the centre)."""
+    h, w, zoom = 240, 320, 1.4
+    a, b = texture(h, w), texture(h, w, zoom=zoom)
+    c = np.array([(w - 1) / 2, (h - 1) / 2])
+    uv = detect_grid(a, None, CFG)
+    truth = c + zoom * (uv - c)
+    inside = ((truth > 5) & (truth < np.array([w - 6, h - 6]))).all(axis=1)
+    assert inside.sum() > 25
+    guess = truth + np.random.default_rng(0).normal(0.0, 1.0, truth.shape)
+    pa, pb = build_pyramid(a, CFG), build_pyramid(b, CFG)
+    plain, ok_plain = track_lk(pa, pb, uv, CFG, guess)
+    scaled, ok_scaled = track_lk_scaled(pa, pb, uv, CFG, guess, np.full(len(uv), zoom))
+    err_plain = np.linalg.norm(plain - truth, axis=1)[ok_plain & inside]
+    err_scaled = np.linalg.norm(scaled - truth, axis=1)[ok_scaled & inside]
+    assert len(err_plain) < 0.5 * inside.sum() or np.percentile(err_plain, 95) > 1.0
+    assert len(err_scaled) >= 0.9 * inside.sum()
+    assert np.percentile(err_scaled, 95) < 0.5
+    # unit scale: the plain LK, bit for bit
+    same, ok_same = track_lk_scaled(pa, pb, uv, CFG, guess, np.ones(len(uv)))
+    np.testing.assert_array_equal(same[ok_same], plain[ok_plain])
+
+
+def _keyframe_then_jump(shift):
+    """A front end with a keyframe on a textured stereo pair (8 px disparity everywhere) and then
+    tracked into the left image shifted by ``shift`` px; returns (front end, keyframe stereo, frame)."""
+    h, w = 360, 480
+    fe = ImageFrontEnd(_rectified_rig(h, w), CFG)
+    f0 = SimpleNamespace(left=texture(h, w, seed=4), right=texture(h, w, (-8.0, 0.0), seed=4), t_ns=0)
+    fe.track(f0)
+    stereo = fe.keyframe(f0)
+    f1 = SimpleNamespace(left=texture(h, w, tuple(shift), seed=4), right=None, t_ns=1)
+    fe.track(f1)
+    return fe, stereo, f1
+
+
+def _jump_errors(obs, stereo, shift) -> np.ndarray:
+    """Distance (px) from the truth of each keyframe feature's pixel in ``obs`` (ids, uv)."""
+    _, i, k = np.intersect1d(obs.ids, stereo.ids, assume_unique=True, return_indices=True)
+    return np.linalg.norm(obs.uv[i] - stereo.uv_left[k] - shift, axis=1)
+
+
+def test_reacquisition_finds_the_keyframe_features_after_a_jump():
+    """A 110 px jump without a prior: LK keeps almost nothing right; the keyframe's ORB descriptors,
+    matched over the whole image and refined by LK from the keyframe's image, bring back a third of
+    the keyframe's features to within 0.1 px (the rest: lost, or periodic look-alikes the pose's
+    RANSAC removes).  A prediction 100 px off confines the guided search away from the truth: nothing right."""
+    shift = np.array([110.0, 12.0])
+    fe, st, f1 = _keyframe_then_jump(shift)
+    assert len(st) > 100
+    lk = FeatureObs(fe.ids, fe.uv)
+    assert (_jump_errors(lk, st, shift) < 0.1).sum() < 0.05 * len(st)
+    found = fe.reacquire(f1)
+    assert fe.timings["reacquire"] > 0
+    assert np.array_equal(fe.ids, lk.ids) and np.array_equal(fe.uv, lk.uv)  # a proposal until adopted
+    err = _jump_errors(found, st, shift)
+    assert (err < 0.1).sum() > 0.25 * len(st)
+    assert (err < 0.1).sum() > 0.75 * (err < 3).sum()  # refined to LK precision, not ORB's corner pixels
+    fe.adopt(f1, found)
+    assert np.array_equal(fe.ids, found.ids)
+
+    fe, st, f1 = _keyframe_then_jump(shift)
+    off = Prediction(st.ids, st.uv_left + shift + np.array([100.0, 0.0]), np.ones(len(st)))
+    assert (_jump_errors(fe.reacquire(f1, off), st, shift) < 1.0).sum() == 0
 
 
 def test_fit_inplane_recovers_rotation_and_shift_despite_outliers():
