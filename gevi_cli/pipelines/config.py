@@ -41,6 +41,8 @@ class TriangulationConfig:
 
     min_depth_m: float = opt(0.5, "points nearer than this are not used (m)")
     max_depth_m: float = opt(100.0, "points farther than this are not used (m)")
+    min_disparity_px: float = opt(0.0, "points with less stereo disparity than this are not used (px): the "
+                                       "depth cap in the rig's own terms, the same for every baseline")
     min_points: int = opt(20, "a keyframe with fewer triangulated points cannot be tracked against")
 
 

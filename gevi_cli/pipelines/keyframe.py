@@ -39,13 +39,15 @@ class Keyframe:
 
 
 def make_keyframe(index: int, t_ns: int, T_w_k: np.ndarray, stereo: StereoObs, camera: RectifiedStereo,
-                  min_depth_m: float, max_depth_m: float) -> Keyframe:
-    """Triangulate ``stereo`` (spec 4) and keep the points inside the depth gate."""
+                  min_depth_m: float, max_depth_m: float, min_disparity_px: float = 0.0) -> Keyframe:
+    """Triangulate ``stereo`` (spec 4) and keep the points inside the depth gate and with at least
+    ``min_disparity_px`` of disparity."""
     ids = np.asarray(stereo.ids, dtype=np.int64)
     z = camera.normalize(stereo.uv_left)
     y = camera.normalize(stereo.uv_right)
     depth = camera.depth_from_disparity(stereo.disparity)
     keep = (depth >= min_depth_m) & (depth <= max_depth_m) & np.isfinite(depth)
+    keep &= np.asarray(stereo.disparity, dtype=np.float64) >= min_disparity_px
     if keep.sum() >= 3:
         # a match refined along the rectified row has y2 = z2 exactly: one measurement, not two
         tied = z[keep, 1] == y[keep, 1]
