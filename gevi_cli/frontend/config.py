@@ -72,7 +72,8 @@ class FrontendConfig:
 
     predict: bool = True
     """Start each feature's LK where the back end's motion prediction puts its keyframe point (constant
-    velocity; GeVI's rotation from the gyro) instead of at its previous pixel."""
+    velocity; GeVI's rotation from the gyro) instead of at its previous pixel, at its predicted patch
+    scale (``lk_scale_step``)."""
 
     lk_scale_step: float = 1.15
     """Predicted features whose patch grows or shrinks by more than about half this factor between

@@ -79,8 +79,8 @@ class ImageFrontEnd:
         ``rotation``: predicted ``R_cp`` (3, 3), previous rectified-left camera coordinates ->
         current ones (None: the rotation fitted to the last step's tracks); removed before LK when
         ``cfg.derotate`` is on and it exceeds ``cfg.derotate_min_deg``.  ``predicted``: the back end's
-        predicted pixels in ``frame`` of some features (their keyframe points seen from the predicted
-        pose); LK starts there instead of at the previous pixel."""
+        predicted pixels and patch scales in ``frame`` of some features (their keyframe points seen from
+        the predicted pose); LK starts there instead of at the previous pixel, at that scale."""
         self.timings = dict.fromkeys(STAGES, 0.0)
         self._track(frame, rotation, predicted)
         return FeatureObs(self.ids, self.uv)
