@@ -21,13 +21,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from gevi_cli.datasets.kitti import read_calib
+
 
 def _calib(seq: Path) -> tuple[np.ndarray, float]:
-    """(K 3x3, baseline m) of the rectified pair from KITTI's calib.txt (P0, P1)."""
-    rows = {line.split(":")[0]: np.array(line.split(":")[1].split(), float)
-            for line in (seq / "calib.txt").read_text().splitlines() if ":" in line}
-    P0, P1 = rows["P0"].reshape(3, 4), rows["P1"].reshape(3, 4)
-    return P0[:, :3], -P1[0, 3] / P1[0, 0]
+    """(K 3x3, baseline m) of the rectified pair, from calib.txt's P0 and P1 (gevi's KITTI reader)."""
+    P = read_calib(seq / "calib.txt")
+    return P["P0"][:, :3], -P["P1"][0, 3] / P["P1"][0, 0]
 
 
 def _gt_positions(seq: Path, stride: int) -> np.ndarray:

@@ -26,9 +26,9 @@ class FrontEnd(Protocol):
         previous -> current coordinates) or None; ``predicted``: a :class:`Prediction` of the pixels
         and patch scales of some features in ``frame``, or None.  A front end may use both as tracking priors."""
 
-    def reacquire(self, frame, predicted=None, radius_px=None, keep_tracks=False) -> FeatureObs | None:
+    def reacquire(self, frame, predicted=None, keep_tracks=False) -> FeatureObs | None:
         """After ``track(frame)``: the frame's features with the last keyframe's found again by
-        descriptor (near ``predicted`` pixels where given, within ``radius_px``; with ``keep_tracks``
+        descriptor (near ``predicted`` pixels where given; with ``keep_tracks``
         only those LK lost), or None when it cannot.  A proposal: the front end's state is unchanged until ``adopt``."""
 
     def adopt(self, frame, obs) -> None:

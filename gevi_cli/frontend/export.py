@@ -51,7 +51,7 @@ class ExportFrontEnd:
                             "with exported tracks the keyframes are the export's (keyframe_decision)")
         return frame.stereo
 
-    def reacquire(self, frame: TrackFrame, predicted=None, radius_px=None, keep_tracks=False) -> None:
+    def reacquire(self, frame: TrackFrame, predicted=None, keep_tracks=False) -> None:
         """Exported tracks cannot be re-matched (no images): None."""
         return None
 

@@ -85,11 +85,10 @@ class ImageFrontEnd:
         self._track(frame, rotation, predicted)
         return FeatureObs(self.ids, self.uv)
 
-    def reacquire(self, frame, predicted: Prediction | None = None, radius_px: float | None = None,
-                  keep_tracks: bool = False) -> FeatureObs | None:
+    def reacquire(self, frame, predicted: Prediction | None = None, keep_tracks: bool = False) -> FeatureObs | None:
         """The last keyframe's features found again in ``frame`` (the frame ``track`` just ran on) by
-        ORB descriptors, guided by ``predicted`` pixels where given (:mod:`~gevi_cli.frontend.reacquire`),
-        within ``radius_px`` of them (default ``cfg.reacquire_radius_px``).
+        ORB descriptors, guided by ``predicted`` pixels where given (within ``cfg.reacquire_radius_px``;
+        :mod:`~gevi_cli.frontend.reacquire`).
 
         Each match is refined to sub-pixel by LK from the keyframe's image, started at the matched
         detection with the patch scaled by the detection's pyramid scale, and kept only if that LK
@@ -103,7 +102,7 @@ class ImageFrontEnd:
         with self._timed("reacquire"):  # added to this frame's track() timings
             if self._kf_patches is None:
                 self._kf_patches = reacquire.describe(self._kf_pyr.image, *self._kf_features, self.cfg)
-            ids, uv, scale = reacquire.match(self._kf_patches, self._left.image, self.cfg, predicted, radius_px)
+            ids, uv, scale = reacquire.match(self._kf_patches, self._left.image, self.cfg, predicted)
             order = np.argsort(self._kf_patches.ids)
             kf_uv = self._kf_patches.uv[order[np.searchsorted(self._kf_patches.ids, ids, sorter=order)]]
             uv, ok = track_lk_scaled(self._kf_pyr, self._left, kf_uv, self.cfg, uv, scale)

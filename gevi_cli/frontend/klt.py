@@ -107,26 +107,31 @@ def track_lk_scaled(pyr_prev: Pyramid, pyr_cur: Pyramid, uv_prev: np.ndarray, cf
     look-alike.  The features are grouped by scale in steps of ``cfg.lk_scale_step`` (a factor); for
     each group other than the unit one the previous image is resized by the group's scale (an affine
     warp, the translation putting the group's features at their guesses on average) and the group is
-    tracked from that image, so LK sees patches of the right size.  A feature whose warped start falls
-    outside the image, or whose scaled track fails, keeps its plain :func:`track_lk` result.
+    tracked from that image, so LK sees patches of the right size.  The unit group, a feature whose
+    warped start falls outside the image and one whose scaled track fails get the plain
+    :func:`track_lk` (one call for all of them; OpenCV's LK tracks each point on its own).
     """
     uv_prev = np.asarray(uv_prev, np.float64).reshape(-1, 2)
     guess = np.asarray(uv_guess, np.float64).reshape(-1, 2)
-    uv, ok = track_lk(pyr_prev, pyr_cur, uv_prev, cfg, guess)
+    n = len(uv_prev)
+    uv, ok = np.full((n, 2), np.nan), np.zeros(n, bool)
     step = np.log(float(cfg.lk_scale_step))
     group = np.round(np.log(np.clip(np.asarray(scale, np.float64), 1e-3, 1e3)) / step)
+    plain = ~np.isfinite(group) | (group == 0)
     h, w = pyr_cur.shape
-    for g in np.unique(group[np.isfinite(group) & (group != 0)]):
+    for g in np.unique(group[~plain]):
         members = np.flatnonzero(group == g)
         s = float(np.exp(g * step))
         t = np.median(guess[members] - s * uv_prev[members], axis=0)
-        A = np.array([[s, 0.0, t[0]], [0.0, s, t[1]]])
         src = s * uv_prev[members] + t
         inside = in_image(src, (h, w))
-        if not inside.any():
-            continue
-        members, src = members[inside], src[inside]
-        warped = build_pyramid(cv2.warpAffine(pyr_prev.image, A, (w, h), flags=cv2.INTER_LINEAR), cfg)
-        uv_g, ok_g = track_lk(warped, pyr_cur, src, cfg, guess[members])
-        uv[members[ok_g]], ok[members[ok_g]] = uv_g[ok_g], True
+        if inside.any():
+            A = np.array([[s, 0.0, t[0]], [0.0, s, t[1]]])
+            warped = build_pyramid(cv2.warpAffine(pyr_prev.image, A, (w, h), flags=cv2.INTER_LINEAR), cfg)
+            uv_g, ok_g = track_lk(warped, pyr_cur, src[inside], cfg, guess[members[inside]])
+            uv[members[inside]], ok[members[inside]] = uv_g, ok_g
+        plain[members[~ok[members]]] = True
+    idx = np.flatnonzero(plain)
+    if len(idx):
+        uv[idx], ok[idx] = track_lk(pyr_prev, pyr_cur, uv_prev[idx], cfg, guess[idx])
     return uv, ok

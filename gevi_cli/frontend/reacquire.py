@@ -55,15 +55,14 @@ def describe(image: np.ndarray, ids: np.ndarray, uv: np.ndarray, cfg: FrontendCo
 
 
 def match(kf: KeyframePatches, image: np.ndarray, cfg: FrontendConfig,
-          predicted: Prediction | None = None,
-          radius_px: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+          predicted: Prediction | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The keyframe's features found in ``image``: (ids (m,), pixels (m, 2), scales (m,)), a scale
     being the size of the matched detection over the keyframe descriptor's (the ORB pyramid level's
     scale: how much larger the feature appears than in the keyframe).  The pixels are those of ORB's
     detections (FAST corners, ~1 px from the keyframe feature's own corner): a coarse position.
 
     ``predicted``: features' predicted pixels in ``image`` (ids and (k, 2) pixels); such a feature is matched only to a
-    detection within ``radius_px`` (default ``cfg.reacquire_radius_px``) of it.  A match needs a Hamming distance of at most
+    detection within ``cfg.reacquire_radius_px`` of it.  A match needs a Hamming distance of at most
     ``cfg.reacquire_max_hamming``, and, among the candidates it was allowed, the best distance below
     ``cfg.reacquire_ratio`` times the second best; a detection claimed by two features goes to neither."""
     empty = (np.empty(0, np.int64), np.empty((0, 2)), np.empty(0))
@@ -84,8 +83,7 @@ def match(kf: KeyframePatches, image: np.ndarray, cfg: FrontendConfig,
         mask = np.ones((len(kf.ids), len(pts)), np.uint8)
         _, rows, j = np.intersect1d(kf.ids, predicted.ids, assume_unique=True, return_indices=True)
         d2 = ((predicted.uv[j, None, :] - pts[None, :, :]) ** 2).sum(2)
-        r = cfg.reacquire_radius_px if radius_px is None else radius_px
-        mask[rows] = d2 <= float(r) ** 2
+        mask[rows] = d2 <= float(cfg.reacquire_radius_px) ** 2
     knn = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(kf.desc, desc, k=2, mask=mask)
     n = len(kf.ids)
     best, second = np.full(n, np.inf), np.full(n, np.inf)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gevi_cli import estimators as est
-from gevi_cli.frontend import FeatureObs, FrontEnd, Prediction
+from gevi_cli.frontend import FrontEnd, Prediction
 from gevi_cli.geometry import invert_pose
 from gevi_cli.pipelines.config import OdometryConfig
 from gevi_cli.pipelines.keyframe import Keyframe, make_keyframe
@@ -225,22 +225,15 @@ class KeyframeOdometry:
         R_cp = self.rotation_prior()
         if R_cp is not None:
             step[:3, :3] = R_cp.T
-        T_pk = invert_pose(self.T_w_last) @ self.kf.T_w_k
-        return self._project(invert_pose(step) @ T_pk, T_pk)
-
-    def _project(self, T_ck: np.ndarray, T_pk: np.ndarray | None = None) -> Prediction:
-        """The keyframe's points (in front of the camera) as pixels of a frame whose pose is ``T_ck``,
-        with their patch scale against the previous frame of pose ``T_pk`` (1 where that is not given)."""
+        T_pk = invert_pose(self.T_w_last) @ self.kf.T_w_k  # keyframe -> previous frame
+        T_ck = invert_pose(step) @ T_pk  # keyframe -> predicted current frame
         pc = self.kf.p @ T_ck[:3, :3].T + T_ck[:3, 3]
         front = pc[:, 2] > self.cfg.triangulation.min_depth_m
         xy = pc[front, :2] / pc[front, 2:]
         c = self.camera
         uv = np.column_stack([c.fx * xy[:, 0] + c.cx, c.fy * xy[:, 1] + c.cy])
-        scale = np.ones(len(uv))
-        if T_pk is not None:
-            z_prev = self.kf.p[front] @ T_pk[2, :3] + T_pk[2, 3]
-            scale = np.where(z_prev > 0, z_prev / pc[front, 2], 1.0)
-        return Prediction(self.kf.ids[front], uv, scale)
+        z_prev = self.kf.p[front] @ T_pk[2, :3] + T_pk[2, 3]
+        return Prediction(self.kf.ids[front], uv, np.where(z_prev > 0, z_prev / pc[front, 2], 1.0))
 
     def rotation_prior(self) -> np.ndarray | None:
         """Predicted rotation ``R_cp`` (previous -> current rectified-left camera coordinates) of the
