@@ -130,5 +130,13 @@ class FrontendConfig:
             raise ValueError(f"derotate_prior must be 'pose' or 'image', got {self.derotate_prior!r}")
         if self.derotate_min_deg < 0:
             raise ValueError(f"need derotate_min_deg >= 0, got {self.derotate_min_deg}")
+        if not self.lk_scale_step > 1.0:
+            raise ValueError(f"need lk_scale_step > 1 (a factor), got {self.lk_scale_step}")
+        if (self.reacquire_features < 1 or self.reacquire_fast_threshold < 1 or not self.reacquire_radius_px > 0
+                or not 0 <= self.reacquire_max_hamming <= 256 or not 0.0 < self.reacquire_ratio <= 1.0):
+            raise ValueError("need reacquire_features >= 1, reacquire_fast_threshold >= 1, reacquire_radius_px > 0, "
+                             f"0 <= reacquire_max_hamming <= 256, 0 < reacquire_ratio <= 1; got {self.reacquire_features}, "
+                             f"{self.reacquire_fast_threshold}, {self.reacquire_radius_px}, {self.reacquire_max_hamming}, "
+                             f"{self.reacquire_ratio}")
         if not 0.0 < self.min_depth_m < self.max_depth_m:
             raise ValueError(f"need 0 < min_depth_m < max_depth_m, got {self.min_depth_m}, {self.max_depth_m}")

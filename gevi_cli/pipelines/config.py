@@ -246,6 +246,9 @@ class OdometryConfig:
             raise GeviError(f"{where}: pnp.max_refine_steps", f"must be >= 1, got {self.pnp.max_refine_steps}")
         if not self.ba.delta_sigmas > 0:
             raise GeviError(f"{where}: ba.delta_sigmas", f"must be > 0, got {self.ba.delta_sigmas}")
+        if not self.triangulation.min_disparity_px >= 0:
+            raise GeviError(f"{where}: triangulation.min_disparity_px",
+                            f"must be >= 0 (px), got {self.triangulation.min_disparity_px}")
         if not self.pnp.reverify_sigmas > 0:
             raise GeviError(f"{where}: pnp.reverify_sigmas", f"must be > 0, got {self.pnp.reverify_sigmas}")
         return self

@@ -35,6 +35,10 @@ def test_set_and_shortcuts_override_in_order(capsys):
     (["--set", "frontend.quality_percentile=0"], "--set: frontend", "quality_percentile <= 100"),
     (["--set", "frontend.cell_px=0"], "--set: frontend", "invalid front-end config"),
     (["--set", "ba.delta_sigmas=0"], "ba.delta_sigmas", "must be > 0"),
+    # a scale step of 1 would put every feature in one group of log(1) = 0 (no scale at all, silently)
+    (["--set", "frontend.lk_scale_step=1"], "--set: frontend", "lk_scale_step > 1"),
+    (["--set", "frontend.reacquire_ratio=1.5"], "--set: frontend", "0 < reacquire_ratio <= 1"),
+    (["--set", "triangulation.min_disparity_px=-1"], "triangulation.min_disparity_px", "must be >= 0"),
 ])
 def test_bad_set_is_one_line(args, where, what, capsys):
     code, _, err = run_cli(["run", "--dump-config"] + args, capsys)
