@@ -114,8 +114,9 @@ class FrontendConfig:
     min_depth_m: float = 0.5
     """Nearest accepted stereo depth (m): disparity <= fx * baseline / min_depth_m."""
 
-    max_depth_m: float = 100.0
-    """Farthest accepted stereo depth (m): disparity >= fx * baseline / max_depth_m."""
+    max_depth_m: float = float("inf")
+    """Farthest accepted stereo depth (m): disparity >= fx * baseline / max_depth_m.  Unbounded by
+    default: the keyframe decides which far points it uses (``triangulation.*``)."""
 
     border_px: int = 8
     """No corner is detected closer than this to the image edge (px)."""

@@ -43,6 +43,8 @@ class TriangulationConfig:
     max_depth_m: float = opt(100.0, "points farther than this are not used (m)")
     min_disparity_px: float = opt(0.0, "points with less stereo disparity than this are not used (px): the "
                                        "depth cap in the rig's own terms, the same for every baseline")
+    fill_points: int = opt(100, "a keyframe with fewer points inside the far gate (max_depth_m, min_disparity_px) "
+                                "keeps the points beyond it too (0: never)")
     min_points: int = opt(20, "a keyframe with fewer triangulated points cannot be tracked against")
 
 
@@ -249,6 +251,8 @@ class OdometryConfig:
         if not self.triangulation.min_disparity_px >= 0:
             raise GeviError(f"{where}: triangulation.min_disparity_px",
                             f"must be >= 0 (px), got {self.triangulation.min_disparity_px}")
+        if not self.triangulation.fill_points >= 0:
+            raise GeviError(f"{where}: triangulation.fill_points", f"must be >= 0, got {self.triangulation.fill_points}")
         if not self.pnp.reverify_sigmas > 0:
             raise GeviError(f"{where}: pnp.reverify_sigmas", f"must be > 0, got {self.pnp.reverify_sigmas}")
         return self

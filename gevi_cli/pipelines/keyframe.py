@@ -12,6 +12,10 @@ import numpy as np
 from gevi_cli import estimators as est
 from gevi_cli.frontend.types import RectifiedStereo, StereoObs
 
+FILL_SIGMAS = 3.0
+"""A point that fills a keyframe beyond its far gate needs a disparity this many standard deviations
+above zero."""
+
 
 @dataclass
 class Keyframe:
@@ -39,15 +43,26 @@ class Keyframe:
 
 
 def make_keyframe(index: int, t_ns: int, T_w_k: np.ndarray, stereo: StereoObs, camera: RectifiedStereo,
-                  min_depth_m: float, max_depth_m: float, min_disparity_px: float = 0.0) -> Keyframe:
+                  min_depth_m: float, max_depth_m: float, min_disparity_px: float = 0.0,
+                  fill_points: int = 0, sigma_px: float = 0.0) -> Keyframe:
     """Triangulate ``stereo`` (spec 4) and keep the points inside the depth gate and with at least
-    ``min_disparity_px`` of disparity."""
+    ``min_disparity_px`` of disparity.  When fewer than ``fill_points`` pass, the points beyond that
+    far gate are kept too (ORB-SLAM's stereo keyframes take far points while they have fewer than 100
+    near ones), so that a scene whose texture is all far away (a highway, open water) still has points
+    to track; their covariance carries their depth uncertainty.  A filling point's disparity must
+    differ from zero by :data:`FILL_SIGMAS` standard deviations of a disparity, ``sqrt(2) sigma_px``
+    (two noisy pixels; ``sigma_px`` the image noise std, px): nearer to zero its depth is unbounded."""
     ids = np.asarray(stereo.ids, dtype=np.int64)
     z = camera.normalize(stereo.uv_left)
     y = camera.normalize(stereo.uv_right)
-    depth = camera.depth_from_disparity(stereo.disparity)
+    disparity = np.asarray(stereo.disparity, dtype=np.float64)
+    depth = camera.depth_from_disparity(disparity)
     keep = (depth >= min_depth_m) & (depth <= max_depth_m) & np.isfinite(depth)
-    keep &= np.asarray(stereo.disparity, dtype=np.float64) >= min_disparity_px
+    keep &= disparity >= min_disparity_px
+    if keep.sum() < fill_points:
+        floor = max(FILL_SIGMAS * np.sqrt(2.0) * sigma_px, 0.01)
+        far = np.flatnonzero(~keep & (depth >= min_depth_m) & (disparity >= floor))  # beyond the far gate
+        keep[far] = True
     if keep.sum() >= 3:
         # a match refined along the rectified row has y2 = z2 exactly: one measurement, not two
         tied = z[keep, 1] == y[keep, 1]

@@ -343,7 +343,8 @@ class KeyframeOdometry:
         timings.update({f"fe_{k}": timings.get(f"fe_{k}", 0.0) + v
                         for k, v in getattr(self.frontend, "timings", {}).items()})
         new = make_keyframe(res.index, res.t_ns, res.T_w_c, stereo, self.camera, cfg.triangulation.min_depth_m,
-                            cfg.triangulation.max_depth_m, cfg.triangulation.min_disparity_px)
+                            cfg.triangulation.max_depth_m, cfg.triangulation.min_disparity_px,
+                            cfg.triangulation.fill_points, float(np.sqrt(self.sigma2) * self.camera.f))
         if cfg.noise.method == "stereo" and len(new) >= 9:
             try:
                 self._set_sigma2(est.sigma2_stereo(new.z, new.y, self.camera.R_rl, self.camera.t_rl))

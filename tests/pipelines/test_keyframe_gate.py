@@ -25,3 +25,20 @@ def test_min_disparity_is_the_same_cap_on_every_baseline():
         # without the floor every point inside the depth limits stays
         kf = make_keyframe(0, 0, np.eye(4), _stereo(disp, rig), rig, 0.5, 1000.0)
         assert len(kf.ids) == len([d for d in disp if 0.5 <= f * baseline / d <= 1000.0])
+
+
+def test_a_keyframe_short_of_near_points_keeps_its_far_ones():
+    """Fewer than fill_points inside the far gate: the points beyond it are kept too, down to a disparity
+    of 3 standard deviations of a disparity (sqrt(2) sigma_px) above zero; enough near points: the gate holds."""
+    rig = RectifiedStereo(1241, 376, 707.0, 707.0, 620.0, 188.0, 0.54)  # 100 m = 3.82 px
+    disp = [0.2, 0.5, 1.0, 3.0, 10.0, 50.0]
+    sigma_px = 0.1  # floor 3 x sqrt(2) x 0.1 = 0.42 px
+    kf = make_keyframe(0, 0, np.eye(4), _stereo(disp, rig), rig, 0.5, 100.0, fill_points=3, sigma_px=sigma_px)
+    assert kf.ids.tolist() == [1, 2, 3, 4, 5]
+    np.testing.assert_allclose(kf.p[:, 2], 707.0 * 0.54 / np.array(disp[1:]), rtol=1e-9)
+    # the far points' depth uncertainty is in their covariance: std of Z grows as Z^2 / (f b)
+    sz = np.sqrt(kf.cov_unit[:, 2, 2])
+    np.testing.assert_allclose(sz[:2] / sz[-1], (np.array(disp[-1]) / np.array(disp[1:3])) ** 2, rtol=0.05)
+    for fill in (0, 2):  # two near points (10, 50 px) are enough: nothing beyond the gate
+        kf = make_keyframe(0, 0, np.eye(4), _stereo(disp, rig), rig, 0.5, 100.0, fill_points=fill, sigma_px=sigma_px)
+        assert kf.ids.tolist() == [4, 5]

@@ -39,6 +39,7 @@ def test_set_and_shortcuts_override_in_order(capsys):
     (["--set", "frontend.lk_scale_step=1"], "--set: frontend", "lk_scale_step > 1"),
     (["--set", "frontend.reacquire_ratio=1.5"], "--set: frontend", "0 < reacquire_ratio <= 1"),
     (["--set", "triangulation.min_disparity_px=-1"], "triangulation.min_disparity_px", "must be >= 0"),
+    (["--set", "triangulation.fill_points=-1"], "triangulation.fill_points", "must be >= 0"),
 ])
 def test_bad_set_is_one_line(args, where, what, capsys):
     code, _, err = run_cli(["run", "--dump-config"] + args, capsys)
