@@ -47,7 +47,8 @@ from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches, _make_T
 from gevi_cli.pipelines.recent_motion import RecentMotion
 from gevi_cli.pipelines.acc_bias import AccBiasTracker
 from gevi_cli.pipelines.window_gravity import WindowGravity
-from gevi_cli.pipelines.pose6 import opencv_pnp, reprojection_median_px, tracked_pose6
+from gevi_cli.pipelines.pose6 import (converged_limit_px, opencv_pnp, pnp_ransac_inliers, reprojection_median_px,
+                                      tracked_pose6)
 from gevi_cli.pipelines.types import INERTIAL, OK
 from gevi_cli.pipelines.verification import FivePointL1Verification, ThreePointVerification, TrackingFailure
 
@@ -373,16 +374,49 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
             return _make_T(R, t)
         cov = m.cov_unit * self.sigma2
         L_k, L_c, _ = self._levelling()
-        psi, t = self._pose4(m, cov, L_k, L_c)
         if self.cfg.fusion.mode == "bcd":
-            R, t = self._gated_bcd(m, cov, psi, t, L_k, L_c)
-        else:
-            R = est.rot4(psi, L_k, L_c)
-            self.tilt, self.tilt_cov = self.tilt_pred.copy(), np.full((2, 2), np.nan)
-        med = reprojection_median_px(R, t, m.p, m.q, self.camera.f)
-        if not np.isfinite(med) or med > self.cfg.pnp.max_median_px:
+            self._note_innovation()
+        R, t = self._gevi_pose(m, cov, L_k, L_c)
+        f, pc = self.camera.f, self.cfg.pnp
+        med = reprojection_median_px(R, t, m.p, m.q, f)
+        if pc.reverify and not med <= converged_limit_px(pc, self.sigma2, f):
+            # Outliers the 3-point verification cannot see (shifted along their epipolar lines, wrong stereo
+            # depths) drag the pose: found by a 3D-2D RANSAC, and the pose step once more without them,
+            # kept when the median error over all matches collapses -- CFO's re-verification
+            # (pose6.tracked_pose6).  The BCD's state is put back when the second pose is not kept.
+            keep = pnp_ransac_inliers(m.p, m.q, max(pc.reverify_sigmas * np.sqrt(self.sigma2), 1.0 / f))
+            if keep is not None and pc.min_points <= keep.sum() < len(m.p):
+                saved = self._bcd_state()
+                try:
+                    R2, t2 = self._gevi_pose(m.subset(keep), cov[keep], L_k, L_c)
+                    med2 = reprojection_median_px(R2, t2, m.p, m.q, f)
+                except (TrackingFailure, est.EstimatorError):
+                    med2 = np.inf
+                if np.isfinite(med2) and (med2 < 0.5 * med or not np.isfinite(med)):
+                    R, t, med = R2, t2, med2
+                else:
+                    self._restore_bcd_state(saved)
+        if not np.isfinite(med) or med > pc.max_median_px:
             raise TrackingFailure(f"median reprojection error {med:.2f} px after the GeVI pose step")
         return _make_T(R, t)
+
+    def _bcd_state(self):
+        """What a pose step changes besides its result: the tilts (current and window frames), Sigma."""
+        return (self.tilt.copy(), np.array(self.tilt_cov, copy=True), np.array(self.Sigma, copy=True),
+                [np.array(s.tilt, copy=True) for s in self.win])
+
+    def _restore_bcd_state(self, saved) -> None:
+        self.tilt, self.tilt_cov, self.Sigma, tilts = saved
+        for s, tl in zip(self.win, tilts):
+            s.tilt = tl
+
+    def _gevi_pose(self, m: Matches, cov, L_k, L_c):
+        """The 4-DOF step (6), then the BCD (8) or, with ``fusion.mode = 4dof``, the IMU's tilt as it is."""
+        psi, t = self._pose4(m, cov, L_k, L_c)
+        if self.cfg.fusion.mode == "bcd":
+            return self._gated_bcd(m, cov, psi, t, L_k, L_c)
+        self.tilt, self.tilt_cov = self.tilt_pred.copy(), np.full((2, 2), np.nan)
+        return est.rot4(psi, L_k, L_c), t
 
     def _pose4(self, m: Matches, cov, L_k, L_c):
         """4-DOF BE (spec 6.2) + one epipolar GN step (6.3) -> (psi, t_ck).
@@ -440,7 +474,6 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         4-DOF pose first, a cheaper pose, flagged good matches there and cost 2.1 BCDs per frame on
         euroc_micro.)
         """
-        self._note_innovation()
         gate = self.cfg.pnp.chi2_gate
         s2q = self.sigma2 if self.cfg.pnp.current_noise else 0.0
         keep = np.ones(len(m.p), dtype=bool)

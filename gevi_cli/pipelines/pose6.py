@@ -124,7 +124,7 @@ def opencv_pnp(p: np.ndarray, q: np.ndarray, flag: int, refine: bool):
     return cv2.Rodrigues(rvec)[0], tvec.ravel()
 
 
-def _pnp_ransac_inliers(p: np.ndarray, q: np.ndarray, threshold: float) -> np.ndarray | None:
+def pnp_ransac_inliers(p: np.ndarray, q: np.ndarray, threshold: float) -> np.ndarray | None:
     """Inlier mask of OpenCV's P3P RANSAC on the reprojection error (normalized ``threshold``), or
     None when it finds no pose."""
     obj, img = _cv_points(p, q)
@@ -171,7 +171,7 @@ def tracked_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig,
         # Outliers that the epipolar verification cannot see (a group shifted along its epipolar
         # lines: measured on pool-hard_s2, 9 of 63 tracks 38 px off) drag every least-squares pose;
         # a 3D-2D RANSAC on the reprojection error finds them [PROPOSAL; docs/method.md 5.4].
-        keep = _pnp_ransac_inliers(p, q, max(cfg.reverify_sigmas * np.sqrt(sigma2), 1.0 / f))
+        keep = pnp_ransac_inliers(p, q, max(cfg.reverify_sigmas * np.sqrt(sigma2), 1.0 / f))
         if keep is not None and cfg.min_points <= keep.sum() < len(p):
             try:
                 R2, t2, fb2 = estimate_pose6(p[keep], cov[keep], q[keep], cfg, sigma2, f)
