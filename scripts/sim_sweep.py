@@ -163,7 +163,7 @@ def code_fingerprint() -> dict:
     pkg = Path(list(spec.submodule_search_locations)[0])
     root = pkg.parent
     h = hashlib.sha256()
-    files = sorted(pkg.rglob("*.py")) + sorted((root / "configs").glob("*.yaml"))
+    files = sorted(pkg.rglob("*.py")) + sorted((pkg / "configs").glob("*.yaml"))
     for f in files:
         try:
             h.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes() + b"\0")

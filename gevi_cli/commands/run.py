@@ -25,7 +25,7 @@ METHODS = ("gevi", "cfo")
               help="Use every K-th frame (frame j = original frame K*j, its stamp kept; --start and --max-frames "
                    "count strided frames); the IMU and the ground truth stay whole. Not for track exports.")
 @click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
-              help="YAML overriding the defaults (after configs/<kind>.yaml).")
+              help="YAML overriding the defaults (after gevi_cli/configs/<kind>.yaml).")
 @click.option("--set", "sets", multiple=True, metavar="STAGE.KEY=VALUE", help="Override one key (repeatable).")
 @click.option("--pnp", type=click.Choice(["be-w", "be", "ls", "epnp", "sqpnp"]), default=None,
               help="Pose estimator (ablations; = --set pnp.method=...).")

@@ -58,7 +58,7 @@ class FrontendConfig:
     matches, else as "image"), or "image", the front end's fit of the last step's tracks with a
     rotation in the image plane plus a shift, for both methods.  "image" is decoupled from the pose
     and sees only the rotation about the optical axis: better for a downward camera over a floor
-    (configs/pool.yaml), wrong for a forward camera, where a turn's parallax reads as a spurious
+    (gevi_cli/configs/pool.yaml), wrong for a forward camera, where a turn's parallax reads as a spurious
     in-plane rotation (method.md 12.1)."""
 
     affine: bool = False

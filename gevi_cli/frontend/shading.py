@@ -9,7 +9,7 @@ zero motion, and between the two cameras of the rig it differs, so the coarse py
 stereo LK align shading instead of texture.  Measured on pool-hard_s1 (`gevi simulate pool-hard
 --seed 1`), frame 100, 346 corners, 41 px window: 10 stereo matches pass the row and
 forward-backward checks on the raw images, 263-280 after subtracting a Gaussian local mean of
-sigma 5-20 px.  ``configs/pool.yaml`` uses 61 px: a larger kernel keeps more of the floor's
+sigma 5-20 px.  ``gevi_cli/configs/pool.yaml`` uses 61 px: a larger kernel keeps more of the floor's
 mid-frequency texture but leaves more of a narrow light spot (the residual grows as size^2 over the
 spot's width^2; tests/frontend/test_underwater.py), and on KITTI-like scenes with large image motion
 the removal costs LK its coarse-level capture range, so it is off by default (docs/method.md,

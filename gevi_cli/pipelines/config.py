@@ -1,7 +1,7 @@
 """Per-stage configuration of the odometry pipelines (defaults are the product; see gevi_cli.config).
 
 Units: pixels (px) in the rectified images, metres (m), seconds (s).  ``gevi run --dump-config``
-lists every key with its default; ``configs/<kind>.yaml`` overrides them per dataset kind.
+lists every key with its default; ``gevi_cli/configs/<kind>.yaml`` overrides them per dataset kind.
 """
 from __future__ import annotations
 
@@ -258,7 +258,7 @@ class OdometryConfig:
         return self
 
 
-#: Per-method defaults applied over the dataclass defaults (before configs/<kind>.yaml): GeVI verifies
+#: Per-method defaults applied over the dataclass defaults (before gevi_cli/configs/<kind>.yaml): GeVI verifies
 #: with its 3-point RANSAC only (spec 2: no l1 stage).  CFO's l1 stage after it (``--set verify.l1=irls``)
 #: lowers pool-easy's ATE (60 s, 3 seeds: 1.63 -> 1.31 mm at 522e2ed, CFO 1.24) by when keyframes are taken,
 #: not by the points it drops, raises pool-hard's (34.4 -> 37.6 mm), and costs 1.5-2.7 ms per frame: GeVI at

@@ -247,7 +247,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         (``R_cp = R_ic^T exp(rotvec)^T R_ic``); over an IMU gap the last step's, as CFO.  With
         ``frontend.derotate_prior`` "image" none: the front end's in-plane fit, as for CFO."""
         if self.cfg.frontend.derotate_prior == "image":
-            return None  # the front end's in-plane fit (configs/pool.yaml): pool-hard_s1 50 mm against 292 with the gyro's
+            return None  # the front end's in-plane fit (gevi_cli/configs/pool.yaml): pool-hard_s1 50 mm against 292 with the gyro's
         if self.cur is None or self.t_prev is None or not np.all(np.isfinite(self.cur.rotvec)):
             return super().rotation_prior()
         return self.R_ic.T @ self.cur.gyro_rotation().T @ self.R_ic

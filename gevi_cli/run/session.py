@@ -1,7 +1,7 @@
 """One `gevi run`: resolve the configuration, open the input, build front end + odometry, drive the
 run into its folder, evaluate it with the code of `gevi eval`, and print the result.
 
-Configuration precedence (later wins): dataclass defaults -> ``configs/<kind>.yaml`` -> ``--config``
+Configuration precedence (later wins): dataclass defaults -> ``gevi_cli/configs/<kind>.yaml`` -> ``--config``
 -> ``--set`` -> the shortcut options (``--pnp``, ``--no-ba``, ``--seed``).
 """
 from __future__ import annotations
@@ -18,10 +18,11 @@ from gevi_cli.errors import GeviError
 
 
 def config_dir() -> Path:
-    """The per-kind YAMLs: ``configs/`` of the source tree (a checkout, an editable install), else the
-    copy a wheel installs under ``<prefix>/share/gevi/configs`` (pyproject's data-files)."""
-    src = Path(__file__).resolve().parents[2] / "configs"
-    return src if (src / "pool.yaml").is_file() else Path(sys.prefix) / "share" / "gevi" / "configs"
+    """The per-kind YAMLs, package data of ``gevi_cli`` (``gevi_cli/configs/``): the same folder in a
+    checkout, an editable install, a wheel and a ``--user`` install."""
+    from importlib.resources import files
+
+    return Path(str(files("gevi_cli") / "configs"))
 
 
 KIND_CONFIG = {"euroc": "euroc.yaml", "pool": "pool.yaml", "kitti": "kitti.yaml", "ov2slam-tracks": "kitti-tracks.yaml",
@@ -126,7 +127,7 @@ def resolve_config(req: RunRequest, kind: str | None, method: str = "cfo"):
             # a silent fallback to the defaults would run another method than the one documented
             raise GeviError(kind_file, f"the configuration for {kind} sequences is missing (broken installation?)")
         cfg = override(cfg, load_yaml(kind_file), str(kind_file))
-        sources.append(f"configs/{kind_file.name}")
+        sources.append(f"gevi_cli/configs/{kind_file.name}")
     if req.config_file:
         cfg = override(cfg, load_yaml(Path(req.config_file)), req.config_file)
         sources.append(req.config_file)

@@ -232,7 +232,7 @@ def test_slow_moving_start_initialises_from_stereo_odometry(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_standstill_on_a_faint_lamp_lit_floor_ends_when_the_motion_starts(tmp_path, capsys):
-    """pool-hard seed 1 (a feature-poor floor under the vehicle's lamps; configs/pool.yaml removes the
+    """pool-hard seed 1 (a feature-poor floor under the vehicle's lamps; gevi_cli/configs/pool.yaml removes the
     shading): at rest for 1.5 s, then a smooth start.  The floor's faint features random-walk at rest
     and most are lost within 0.5 s; the standstill must be recognised (not the moving-start
     initialisation at rest) and must end within 0.5 s of the first motion, so that the gyro bias of

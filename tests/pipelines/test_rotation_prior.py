@@ -40,7 +40,7 @@ def test_no_prior_after_a_poorly_verified_or_bridged_step():
 
 def test_image_prior_config_leaves_the_prediction_to_the_front_end():
     odo = _odometry(100, 90)
-    odo.cfg.frontend.derotate_prior = "image"  # configs/pool.yaml
+    odo.cfg.frontend.derotate_prior = "image"  # gevi_cli/configs/pool.yaml
     assert odo.rotation_prior() is None
 
 
