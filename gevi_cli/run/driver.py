@@ -1,25 +1,20 @@
-"""The run driver: sequence -> odometry -> run folder (streamed), timing, progress, status.
+"""The run driver: sequence -> odometry -> sinks (the run folder, memory), timing, progress, status.
 
-The odometry objects hold state only; this module owns I/O, clocks, the progress bar and the files
-(see :mod:`gevi_cli.run.folder`).  Poses are written the moment they are final, so an interrupted or
-crashed run leaves every pose it computed on disk, and ``status.json`` says how the run ended.
+The odometry objects hold state only; this module owns the reading, the clocks and the progress bar,
+and hands each pose to the sinks (:mod:`gevi_cli.run.sinks`) the moment it is final, so an interrupted
+or crashed run leaves every pose it computed in its folder, and ``status.json`` says how it ended.
 """
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from gevi_cli.errors import DataError
 from gevi_cli.geometry import invert_pose
 from gevi_cli.pipelines.types import BRIDGED, INERTIAL
-from gevi_cli.run.folder import PoseStream, RunStatus, write_status
-
-#: timing.csv columns (ms); the front-end sub-stages are part of "frontend" and "keyframe".
-STAGES = ("read", "frontend", "fe_rectify", "fe_pyramid", "fe_derotate", "fe_lk", "fe_affine", "fe_detect", "fe_stereo", "fe_reacquire", "verify", "noise", "pose",
-          "keyframe", "ba")
+from gevi_cli.run.folder import RunStatus
 
 
 @dataclass
@@ -55,31 +50,16 @@ def _frames(source, start: int, stop: int):
             yield f.index, f
 
 
-def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: np.ndarray, start: int, stop: int,
-                 kitti_rows: bool, progress: bool = True, warn=print) -> RunOutcome:
-    """Track frames ``start:stop`` of ``source`` and stream the run folder ``run_dir``."""
+def run_odometry(source, odometry, status: RunStatus, sinks, *, T_B_C0: np.ndarray, start: int, stop: int,
+                 progress: bool = True, warn=print) -> RunOutcome:
+    """Track frames ``start:stop`` of ``source``, handing every pose and frame to each of ``sinks``
+    (:mod:`gevi_cli.run.sinks`) the moment it is made."""
     from tqdm import tqdm
 
-    run_dir = Path(run_dir)
     # the world of a stereo odometry is its first cam0 (body trajectory: relative to the first body pose,
     # T_B0_B = T_BC T_C0_C T_CB); a stereo-inertial one has its own gravity-aligned world (T_W_B = T_W_C T_CB)
     T_C_B = invert_pose(T_B_C0)
     T_B_C = T_B_C0 if getattr(odometry, "world_is_cam0", True) else np.eye(4)
-    online = PoseStream(run_dir / "traj_online_body.tum", "tum", "body")
-    # the final (after-BA) poses go to every one of these; the frame decides body or cam0 poses
-    finals = [PoseStream(run_dir / "traj_body.tum", "tum", "body"), PoseStream(run_dir / "traj_cam0.tum", "tum", "cam0")]
-    if kitti_rows:
-        finals += [PoseStream(run_dir / "traj_cam0_kitti.txt", "kitti", "cam0"),
-                   PoseStream(run_dir / "traj_body_kitti.txt", "kitti", "body")]
-    timing = open(run_dir / "timing.csv", "w", buffering=1)
-    timing.write("index,t_ns,total_ms," + ",".join(f"{s}_ms" for s in STAGES) + "\n")
-    frames_csv = open(run_dir / "frames.csv", "w", buffering=1)
-    frames_csv.write("index,t_ns,status,keyframe,matches,inliers,sigma_px,message\n")
-    state_cols = getattr(odometry, "state_columns", None)
-    states_csv = None
-    if state_cols:
-        states_csv = open(run_dir / getattr(odometry, "state_file", "states.csv"), "w", buffering=1)
-        states_csv.write(",".join(state_cols) + "\n")
     stamps: dict[int, int] = {}
     status.frames_total = stop - start
     t_run = time.perf_counter()
@@ -87,16 +67,16 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
 
     def emit_final(items):
         for idx, T_w_c in items:
-            poses = {"cam0": T_w_c, "body": T_B_C @ T_w_c @ T_C_B}
-            for stream in finals:
-                stream.append(stamps[idx], poses[stream.frame])
+            for sink in sinks:
+                sink.final(stamps[idx], T_w_c, T_B_C @ T_w_c @ T_C_B)
 
     def emit_online(items):
         for idx, T_w_c in items:
-            online.append(stamps[idx], T_B_C @ T_w_c @ T_C_B)
+            for sink in sinks:
+                sink.online(stamps[idx], T_B_C @ T_w_c @ T_C_B)
 
     def flush(closing_ba: bool = False):
-        """What the odometry still holds, written: pending poses made final, held online poses."""
+        """What the odometry still holds, handed on: pending poses made final, held online poses."""
         emit_final(odometry.finish(closing_ba=closing_ba))
         emit_online(odometry.release_online())
 
@@ -109,7 +89,8 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
             lost_open = None
 
     bar = tqdm(total=stop - start, unit="frame", disable=not progress, dynamic_ncols=True, leave=False)
-    write_status(run_dir, status)
+    for sink in sinks:
+        sink.status(status)
     try:
         frames = _frames(source, start, stop)
         while True:
@@ -131,13 +112,8 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
             stamps[res.index] = res.t_ns
             emit_online(res.online if res.online is not None else [(res.index, res.T_w_c)])
             emit_final(res.final)
-            timing.write(f"{index},{res.t_ns},{total * 1e3:.3f}," + ",".join(
-                f"{res.timings.get(s, 0.0) * 1e3:.3f}" for s in STAGES) + "\n")
-            msg = res.message.replace(",", ";").replace("\n", " ")
-            frames_csv.write(f"{index},{res.t_ns},{res.status},{int(res.keyframe)},{res.n_matches},{res.n_inliers},"
-                             f"{res.sigma_px:.4f},{msg}\n")
-            if states_csv is not None and res.extra:
-                states_csv.write(",".join(_fmt(res.extra.get(c, "")) for c in state_cols) + "\n")
+            for sink in sinks:
+                sink.frame(index, res, total)
             status.frames_done += 1
             status.keyframes += int(res.keyframe)
             if res.status == BRIDGED:
@@ -155,7 +131,8 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
                 bar.set_postfix_str(f"kf {status.keyframes} inl {res.n_inliers}")
             if status.frames_done % 50 == 0:
                 status.elapsed_s = time.perf_counter() - t_run
-                write_status(run_dir, status)
+                for sink in sinks:
+                    sink.status(status)
         if lost_open is not None:
             close_lost(max(stamps.values()) if stamps else 0)
         flush(closing_ba=True)
@@ -172,27 +149,16 @@ def run_odometry(source, odometry, run_dir: Path, status: RunStatus, *, T_B_C0: 
     except Exception as exc:
         try:
             flush()
-        except Exception:  # the state may be what broke; what was final is already on disk
+        except Exception:  # the state may be what broke; what was final is already handed on
             pass
         status.state, status.message = "crashed", f"{type(exc).__name__}: {exc}"
         raise
     finally:
         bar.close()
-        for stream in [online] + finals:
-            stream.close()
-        timing.close()
-        frames_csv.close()
-        if states_csv is not None:
-            states_csv.close()
         if hasattr(odometry, "summary"):
             status.imu = odometry.summary()
         status.elapsed_s = time.perf_counter() - t_run
         status.pose_fallbacks = int(getattr(odometry, "fallbacks", 0))
-        write_status(run_dir, status)
+        for sink in sinks:
+            sink.close(status)
     return RunOutcome(status, 0 if status.state == "ok" else 3)
-
-
-def _fmt(v) -> str:
-    if isinstance(v, (float, np.floating)):
-        return f"{float(v):.9g}"
-    return str(v)

@@ -253,6 +253,7 @@ def execute(req: RunRequest, echo=print) -> int:
 
     from gevi_cli import __version__
     from gevi_cli.run.driver import run_odometry
+    from gevi_cli.run.sinks import FolderSink
     from gevi_cli.run.folder import PRIMARY, PRIMARY_KITTI, RunStatus, make_run_dir
 
     t_start = time.perf_counter()
@@ -296,9 +297,10 @@ def execute(req: RunRequest, echo=print) -> int:
         if req.stride > 1 else ""
     echo(f"gevi run: {req.method} on {seq_name} ({kind}), frames {req.start}..{stop - 1}{strided} -> {run_dir}")
 
-    outcome = run_odometry(source, odometry, run_dir, status, T_B_C0=np.asarray(frontend.camera.T_B_C0),
-                           start=req.start, stop=stop, kitti_rows=kitti_rows,
-                           progress=not req.quiet and sys.stderr.isatty(), warn=warn)
+    folder = FolderSink(run_dir, kitti_rows, getattr(odometry, "state_columns", None),
+                        getattr(odometry, "state_file", "states.csv"))
+    outcome = run_odometry(source, odometry, status, [folder], T_B_C0=np.asarray(frontend.camera.T_B_C0),
+                           start=req.start, stop=stop, progress=not req.quiet and sys.stderr.isatty(), warn=warn)
     st = outcome.status
     fps = st.frames_done / st.elapsed_s if st.elapsed_s > 0 else float("nan")
     echo(f"{st.frames_tracked}/{st.frames_done} frames tracked, {st.keyframes} keyframes, "

@@ -1,0 +1,115 @@
+"""gevi as a library: run an odometry on a sequence and evaluate a trajectory, in memory.
+
+    from gevi_cli.api import run, evaluate
+
+    result = run("../shared/data/kitti06_head/dataset/sequences/06", method="cfo", stride=3)
+    print(result.frames.status.value_counts(), result.evaluation.ate.trans_rmse)
+    pair = evaluate(result.groundtruth, result.trajectory, align="se3")
+
+``run`` resolves the configuration exactly as ``gevi run`` does (defaults -> the dataset kind's file
+-> ``config`` -> ``sets``), drives the same odometry objects through the same driver, and keeps the
+output in memory; a run folder is one more sink (:class:`gevi_cli.run.sinks.FolderSink`), which is
+what ``gevi run`` adds.  Poses: 4x4, metres; stamps in ns.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from gevi_cli.evaluation.evaluate import EvalSettings, PairResult, evaluate_pair
+from gevi_cli.trajectory import Trajectory
+
+__all__ = ["RunResult", "run", "evaluate"]
+
+
+@dataclass
+class RunResult:
+    """One run in memory.
+
+    ``trajectory`` / ``trajectory_cam0``: the final (after-BA) poses of the body / rectified cam0 in the
+    odometry's world (CFO: the first frame; GeVI: gravity-aligned once initialised); ``online``: the
+    body poses as known when tracked.  ``frames``: one row per frame (status ok / bridged / inertial,
+    keyframe, matches, inliers, noise std in px, message); ``timings``: ms per stage and frame;
+    ``states``: GeVI's per-frame IMU state (None for CFO).  ``status``: what ``status.json`` holds.
+    ``evaluation``: against the sequence's ground truth (None without one), SE(3)-aligned as ``gevi run``.
+    """
+
+    method: str
+    sequence: str
+    config: object  # OdometryConfig
+    trajectory: Trajectory
+    trajectory_cam0: Trajectory
+    online: Trajectory
+    frames: object  # pandas.DataFrame
+    timings: object  # pandas.DataFrame
+    states: object | None  # pandas.DataFrame
+    status: object  # RunStatus
+    groundtruth: Trajectory | None
+    evaluation: PairResult | None
+
+
+def run(sequence, method: str | None = None, config: str | None = None, sets=(), stride: int = 1, start: int = 0,
+        max_frames: int | None = None, seed: int | None = None, groundtruth: str | None = None, sinks=(),
+        progress: bool = False) -> RunResult:
+    """Run ``method`` ("cfo" or "gevi"; default: gevi when the sequence has an IMU) on ``sequence`` (a
+    dataset folder, bag or track export) and return the :class:`RunResult`.  ``config``: a YAML of
+    overrides; ``sets``: ``"KEY=VALUE"`` strings (``gevi run --set``); ``stride``: every K-th frame;
+    ``sinks``: more :class:`~gevi_cli.run.sinks.RunSink` objects to hand the output to as it is made.
+    Raises :class:`gevi_cli.errors.GeviError` for unusable input (one line, as the CLI prints it)."""
+    import pandas as pd
+
+    from gevi_cli.run.driver import run_odometry
+    from gevi_cli.run.folder import RunStatus
+    from gevi_cli.run.session import RunRequest, build, choose_method, frame_range, open_input, resolve_config
+    from gevi_cli.run.sinks import FRAME_COLUMNS, STAGES, MemorySink
+
+    req = RunRequest(sequence=str(sequence), method=method, start=start, max_frames=max_frames, stride=stride,
+                     config_file=None if config is None else str(config), sets=tuple(sets), seed=seed, quiet=True,
+                     groundtruth=None if groundtruth is None else str(groundtruth))
+    source, kind = open_input(req)
+    method, _ = choose_method(req, source)
+    req = dataclasses.replace(req, method=method)
+    cfg, _ = resolve_config(req, kind, method)
+    start, stop = frame_range(req, len(source))
+    frontend, odometry = build(source, kind, cfg, method, warn=lambda msg: None, start=start)
+    memory = MemorySink()
+    status = RunStatus(method=method, stride=stride, sequence=source.name)
+    run_odometry(source, odometry, status, [memory, *sinks], T_B_C0=np.asarray(frontend.camera.T_B_C0), start=start,
+                 stop=stop, progress=progress, warn=lambda msg: None)
+    frames = pd.DataFrame(memory.frame_rows, columns=list(FRAME_COLUMNS))
+    timings = pd.DataFrame(memory.timing_rows, columns=["index", "t_ns", "total"] + list(STAGES))
+    states = pd.DataFrame(memory.state_rows) if memory.state_rows else None
+    online = Trajectory.from_matrices(np.array([r[0] for r in memory.online_rows], dtype=np.int64),
+                                      np.array([r[1] for r in memory.online_rows]).reshape(-1, 4, 4), frame="body")
+    est = memory.trajectory("body")
+    gt = getattr(source, "groundtruth", None)
+    pair = None
+    if gt is not None and len(est):
+        pair = evaluate(gt, est, align=cfg.run.align, delta=cfg.run.rpe_delta, method=method, sequence=source.name)
+    return RunResult(method, source.name, cfg, est, memory.trajectory("cam0"), online, frames, timings, states,
+                     status, gt, pair)
+
+
+def evaluate(reference, estimate, align: str = "se3", delta: float = 1.0, unit: str = "frames",
+             max_diff_s: float = 0.01, method: str = "estimate", sequence: str = "") -> PairResult:
+    """ATE and RPE of ``estimate`` against ``reference`` (Trajectory objects or trajectory files in any
+    format ``gevi eval`` reads), the library call under ``gevi eval``: stamps associated within
+    ``max_diff_s`` seconds, the estimate aligned by ``align`` (se3, sim3, posyaw, origin, none), RPE
+    over ``delta`` frames (``unit`` "frames") or metres ("m").  The PairResult holds ``ate``, ``rpe``,
+    ``alignment``, ``aligned`` and the ``association``; ``status`` "failed" with a ``reason`` when the
+    two cannot be compared."""
+    ref = _trajectory(reference, "body")
+    est = _trajectory(estimate, ref.frame)
+    settings = EvalSettings(align=align, max_diff_s=max_diff_s, rpe_delta=delta, rpe_unit=unit, min_coverage=0.0)
+    return evaluate_pair(ref, est, settings, align, method=method, sequence=sequence)
+
+
+def _trajectory(x, frame: str) -> Trajectory:
+    if isinstance(x, Trajectory):
+        return x
+    from gevi_cli.trajectory import read_trajectory
+
+    return read_trajectory(Path(x), frame=frame)
