@@ -251,7 +251,7 @@ class EurocSequence(Sequence):
         return None
 
     # ----------------------------------------------------------------------------------- images
-    def _read_pair(self, index: int) -> StereoFrame:
+    def read_pair(self, index: int) -> StereoFrame:
         return StereoFrame(int(self._stamps[index]), _imread_gray(self._left[index]), _imread_gray(self._right[index]))
 
 

@@ -177,7 +177,7 @@ class KittiSequence(Sequence):
             self.warnings.append("colour cameras: ground truth is in the cam0 frame; estimates are converted with T_B_C0")
         return gt
 
-    def _read_pair(self, index: int) -> StereoFrame:
+    def read_pair(self, index: int) -> StereoFrame:
         left = cv2.imread(self._left[index], cv2.IMREAD_GRAYSCALE)
         right = cv2.imread(self._right[index], cv2.IMREAD_GRAYSCALE)
         for image, path in ((left, self._left[index]), (right, self._right[index])):

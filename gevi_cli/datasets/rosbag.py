@@ -31,7 +31,7 @@ see :mod:`.bag_streams`); left and right are paired by stamp within ``pair_toler
 
 Images are not held in memory: opening reads the bag once, keeping for every image message only
 its header stamp and bag time (parsed from the first bytes of the serialized message), plus all
-IMU and ground-truth messages.  :meth:`RosbagSequence._read_pair` fetches one pair by bag time;
+IMU and ground-truth messages.  :meth:`RosbagSequence.read_pair` fetches one pair by bag time;
 :meth:`RosbagSequence.frames` streams the requested pairs in one pass.
 
 Calibration (the bag holds none): the ``calib`` option, a Kalibr camchain YAML or an EuRoC
@@ -409,7 +409,7 @@ class RosbagSequence(Sequence):
             raise DataError(self.path, f"cannot read the {topic} image stamped {stamp} ns ({describe_error(err)})") from err
         raise DataError(self.path, f"the {topic} image stamped {stamp} ns has disappeared from the bag (was it modified?)")
 
-    def _read_pair(self, index: int) -> StereoFrame:
+    def read_pair(self, index: int) -> StereoFrame:
         if self._reader is None:
             self._reader = self._open_reader()
         return StereoFrame(int(self._stamps[index]), self._fetch(self._reader, "left", index),
@@ -461,7 +461,7 @@ class RosbagSequence(Sequence):
 
     # ------------------------------------------------------------------------------- lifetime
     def close(self) -> None:
-        """Close the reader kept open for random access (:meth:`_read_pair`); reopened on demand."""
+        """Close the reader kept open for random access (:meth:`read_pair`); reopened on demand."""
         if self._reader is not None:
             reader, self._reader = self._reader, None
             try:

@@ -76,7 +76,7 @@ class Sequence(abc.ABC):
 
     Implementations read metadata eagerly (stamps, calibration, IMU, ground truth) and images lazily:
     they set ``_name``, ``_rig`` (the :class:`StereoRig`) and ``_stamps`` in ``__init__`` and
-    implement ``_read_pair``.
+    implement ``read_pair``.
     """
 
     kind: str = ""
@@ -105,7 +105,7 @@ class Sequence(abc.ABC):
         return self._stamps
 
     @abc.abstractmethod
-    def _read_pair(self, index: int) -> StereoFrame:
+    def read_pair(self, index: int) -> StereoFrame:
         """Load stereo pair ``index`` (0 <= index < len(self))."""
 
     @property
@@ -122,7 +122,7 @@ class Sequence(abc.ABC):
     def frames(self, start: int | None = None, stop: int | None = None, step: int = 1) -> Iterator[StereoFrame]:
         """Lazily iterate stereo pairs ``start:stop:step`` (indices into :attr:`stamps_ns`)."""
         for index in range(*slice(start, stop, step).indices(len(self))):
-            yield self._read_pair(index)
+            yield self.read_pair(index)
 
     @property
     def frame_rate_hz(self) -> float:

@@ -50,8 +50,8 @@ class StridedSequence(Sequence):
             raise AttributeError(name)
         return getattr(self.inner, name)
 
-    def _read_pair(self, index: int) -> StereoFrame:
-        return self.inner._read_pair(self.stride * index)
+    def read_pair(self, index: int) -> StereoFrame:
+        return self.inner.read_pair(self.stride * index)
 
     def frames(self, start: int | None = None, stop: int | None = None, step: int = 1) -> Iterator[StereoFrame]:
         """The inner reader's own iteration (a bag streams in one pass) over the strided indices."""

@@ -88,6 +88,8 @@ class KeyframeOdometry:
 
     name = "odometry"
     world_is_cam0 = True  # W = the first keyframe's rectified cam0 (GeVI: a gravity-aligned W)
+    state_columns: tuple = ()  # per-frame state in FrameResult.extra (GeVI: the IMU state)
+    state_file = "states.csv"
 
     def __init__(self, frontend: FrontEnd, cfg: OdometryConfig):
         self.frontend = frontend
@@ -253,6 +255,10 @@ class KeyframeOdometry:
     def _bridge(self, t_ns: int) -> tuple[np.ndarray, str]:
         """Pose of a frame that could not be tracked: constant velocity from the last pose (``bridged``)."""
         return (self.T_w_last if self.T_w_last is not None else np.eye(4)) @ self.velocity, BRIDGED
+
+    def summary(self) -> dict:
+        """What status.json records of the odometry's own state (a stereo odometry: nothing)."""
+        return {}
 
     def release_online(self) -> list[tuple[int, np.ndarray]]:
         """Online poses still held back (the run ends before they could be re-expressed), as they are."""

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol
 
 import numpy as np
 
@@ -39,3 +40,27 @@ class FrameResult:
     online: list | None = None
     timings: dict = field(default_factory=dict)  # stage -> seconds
     extra: dict = field(default_factory=dict)  # pipeline-specific per-frame state (GeVI: imu_states.csv row)
+
+
+class Odometry(Protocol):
+    """What the run driver (:mod:`gevi_cli.run.driver`) needs of an odometry object.
+
+    ``world_is_cam0``: the world is the first rectified cam0 (a stereo odometry) rather than a frame of
+    the odometry's own (GeVI: gravity-aligned); ``state_columns`` / ``state_file``: the per-frame state
+    each ``FrameResult.extra`` holds and the run-folder file it goes to (no columns: none);
+    ``fallbacks``: frames whose pose step started from SQPnP.  ``finish`` makes the held poses final
+    (``closing_ba``: the sequence ended normally), ``release_online`` hands over held online poses,
+    ``summary`` is what ``status.json`` records of the odometry's own state (``imu``)."""
+
+    world_is_cam0: bool
+    state_columns: tuple
+    state_file: str
+    fallbacks: int
+
+    def track(self, frame) -> FrameResult: ...
+
+    def finish(self, closing_ba: bool = False) -> list: ...
+
+    def release_online(self) -> list: ...
+
+    def summary(self) -> dict: ...

@@ -13,7 +13,7 @@ import numpy as np
 
 from gevi_cli.errors import DataError
 from gevi_cli.geometry import invert_pose
-from gevi_cli.pipelines.types import BRIDGED, INERTIAL
+from gevi_cli.pipelines.types import BRIDGED, INERTIAL, Odometry
 from gevi_cli.run.folder import RunStatus
 
 
@@ -25,7 +25,7 @@ class RunOutcome:
 
 def _read(source, i: int):
     try:
-        return i, source._read_pair(i)
+        return i, source.read_pair(i)
     except DataError as err:
         return i, err
 
@@ -36,7 +36,7 @@ def _frames(source, start: int, stop: int):
     Image sequences are read one frame ahead in a thread: image decoding releases the GIL, so on a
     multi-core machine reading overlaps with tracking (the frames and their order are unchanged).
     """
-    if hasattr(source, "_read_pair"):
+    if hasattr(source, "read_pair"):
         from concurrent.futures import ThreadPoolExecutor
 
         with ThreadPoolExecutor(max_workers=1, thread_name_prefix="gevi-read") as pool:
@@ -50,7 +50,7 @@ def _frames(source, start: int, stop: int):
             yield f.index, f
 
 
-def run_odometry(source, odometry, status: RunStatus, sinks, *, T_B_C0: np.ndarray, start: int, stop: int,
+def run_odometry(source, odometry: Odometry, status: RunStatus, sinks, *, T_B_C0: np.ndarray, start: int, stop: int,
                  progress: bool = True, warn=print) -> RunOutcome:
     """Track frames ``start:stop`` of ``source``, handing every pose and frame to each of ``sinks``
     (:mod:`gevi_cli.run.sinks`) the moment it is made."""
@@ -59,7 +59,7 @@ def run_odometry(source, odometry, status: RunStatus, sinks, *, T_B_C0: np.ndarr
     # the world of a stereo odometry is its first cam0 (body trajectory: relative to the first body pose,
     # T_B0_B = T_BC T_C0_C T_CB); a stereo-inertial one has its own gravity-aligned world (T_W_B = T_W_C T_CB)
     T_C_B = invert_pose(T_B_C0)
-    T_B_C = T_B_C0 if getattr(odometry, "world_is_cam0", True) else np.eye(4)
+    T_B_C = T_B_C0 if odometry.world_is_cam0 else np.eye(4)
     stamps: dict[int, int] = {}
     status.frames_total = stop - start
     t_run = time.perf_counter()
@@ -155,10 +155,9 @@ def run_odometry(source, odometry, status: RunStatus, sinks, *, T_B_C0: np.ndarr
         raise
     finally:
         bar.close()
-        if hasattr(odometry, "summary"):
-            status.imu = odometry.summary()
+        status.imu = odometry.summary()
         status.elapsed_s = time.perf_counter() - t_run
-        status.pose_fallbacks = int(getattr(odometry, "fallbacks", 0))
+        status.pose_fallbacks = int(odometry.fallbacks)
         for sink in sinks:
             sink.close(status)
     return RunOutcome(status, 0 if status.state == "ok" else 3)

@@ -198,7 +198,7 @@ def _check_image_size(source, start: int, sequence) -> None:
     from gevi_cli.errors import DataError
 
     try:
-        frame = source._read_pair(start)
+        frame = source.read_pair(start)
     except DataError:
         return  # an unreadable frame is skipped by the driver and reported there
     rig = source.calibration
@@ -297,8 +297,7 @@ def execute(req: RunRequest, echo=print) -> int:
         if req.stride > 1 else ""
     echo(f"gevi run: {req.method} on {seq_name} ({kind}), frames {req.start}..{stop - 1}{strided} -> {run_dir}")
 
-    folder = FolderSink(run_dir, kitti_rows, getattr(odometry, "state_columns", None),
-                        getattr(odometry, "state_file", "states.csv"))
+    folder = FolderSink(run_dir, kitti_rows, odometry.state_columns, odometry.state_file)
     outcome = run_odometry(source, odometry, status, [folder], T_B_C0=np.asarray(frontend.camera.T_B_C0),
                            start=req.start, stop=stop, progress=not req.quiet and sys.stderr.isatty(), warn=warn)
     st = outcome.status

@@ -216,8 +216,8 @@ def _assert_same_as_euroc(seq, euroc):
     streamed = list(seq.frames())
     assert [f.t_ns for f in streamed] == stamps.tolist()
     for k in (0, 7, N_PAIRS - 1):
-        expected = ref._read_pair(FIRST + k)
-        for frame in (streamed[k], seq._read_pair(k)):
+        expected = ref.read_pair(FIRST + k)
+        for frame in (streamed[k], seq.read_pair(k)):
             assert frame.t_ns == expected.t_ns
             assert frame.left.dtype == np.uint8 and frame.left.shape == (480, 752)
             np.testing.assert_array_equal(frame.left, expected.left)
@@ -253,8 +253,8 @@ def test_ros2_mcap_bag_reads_like_euroc(ros2_bag, euroc):
 def test_topics_option_and_kalibr_writer(ros1_bag, euroc, tmp_path):
     # --topics swaps left and right: the stamps stay, the pixels swap
     seq = open_sequence(ros1_bag, topics="left=/cam1/image_raw,right=/cam0/image_raw,gt=none")
-    frame = seq._read_pair(2)
-    expected = euroc["seq"]._read_pair(FIRST + 2)
+    frame = seq.read_pair(2)
+    expected = euroc["seq"].read_pair(FIRST + 2)
     np.testing.assert_array_equal(frame.left, expected.right)
     assert seq.groundtruth is None and seq.imu is not None
     # a camchain written by gevi's writer reads back to the same rig, and its rostopic chooses the sides
@@ -293,7 +293,7 @@ def test_image_decoding_and_name_rule(tmp_path):
     np.testing.assert_array_equal(gt.t_ns, 1_000_000_007 + np.arange(3) * 50_000_000)
     np.testing.assert_array_equal(gt.positions[:, 0], [0.0, 1.0, 2.0])
     np.testing.assert_array_equal(gt.quat_wxyz, np.tile([0.0, 1.0, 0.0, 0.0], (3, 1)))
-    frame = seq._read_pair(1)
+    frame = seq.read_pair(1)
     np.testing.assert_array_equal(frame.left, cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY))
     np.testing.assert_array_equal(frame.right, (mono16 >> 8).astype(np.uint8))
 

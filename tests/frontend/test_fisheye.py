@@ -80,7 +80,7 @@ def test_fisheye_rectification_puts_a_point_on_one_row_at_the_true_disparity():
 def t265():
     bag = shared_path("real_bags", "kapture_t265_stereo_imu", "trimmed_locoffice.bag")
     seq = open_sequence(bag, topics="gt=none")  # its camchain lies next to it
-    return seq, [seq._read_pair(i) for i in range(len(seq))]
+    return seq, [seq.read_pair(i) for i in range(len(seq))]
 
 
 def _row_offsets(rig, frames):

@@ -65,7 +65,7 @@ def test_stride_keeps_the_whole_imu(pool_render, tmp_path, capsys):
     assert kind == whole.kind and strided.name == whole.name + "_stride2"
     assert np.array_equal(strided.stamps_ns, whole.stamps_ns[::2])
     assert len(strided.imu) == len(whole.imu) and np.array_equal(strided.imu.t_ns, whole.imu.t_ns)
-    assert np.array_equal(strided._read_pair(3).left, whole._read_pair(6).left)
+    assert np.array_equal(strided.read_pair(3).left, whole.read_pair(6).left)
     assert [f.t_ns for f in strided.frames(1, 7, 2)] == list(whole.stamps_ns[2:14:4])
 
     code, _, err = run_cli(["run", pool_render, "--stride", "2", "-q", "-o", tmp_path / "run"], capsys)
