@@ -99,7 +99,7 @@ def ba_with_pnp_terms(w) -> tuple[np.ndarray, np.ndarray]:
 
     from gevi_cli import estimators as est
     from gevi_cli.estimators.epipolar_ba import BAProblem, euler_zyx
-    from gevi_cli.estimators.lie import project_jacobian
+    from gevi_cli.geometry import project_jacobian
 
     sig = float(w.sigma)
     prob = BAProblem(w)

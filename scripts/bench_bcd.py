@@ -74,7 +74,7 @@ def _floor_fn(w):
         _vis_covariance,
         propagate_tilts,
     )
-    from gevi_cli.estimators.lie import project, rot_z, rtilt
+    from gevi_cli.geometry import project, rot_z, rtilt
 
     w = _check_window(w)
     tilts0 = propagate_tilts(w.prior_mean, w.gyro_inc) if w.tilts0 is None else w.tilts0

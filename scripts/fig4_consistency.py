@@ -24,7 +24,7 @@ import pandas as pd  # noqa: E402
 
 from gevi_cli.estimators import EstimatorError, pnp4_gn, pnp6_be, pnp6_refine  # noqa: E402
 from gevi_cli.estimators.pnp4 import pnp4_be_cov  # noqa: E402
-from gevi_cli.estimators.lie import wrap_angle  # noqa: E402
+from gevi_cli.geometry import wrap_angle  # noqa: E402
 from gevi_cli.studies import montecarlo as mc  # noqa: E402
 from gevi_cli.studies.outlier_study import yaw_of  # noqa: E402
 

@@ -8,7 +8,7 @@ rotation model is ``R_ck = L_c^T Rz(psi) L_k``; angles in radians.
 """
 
 from .errors import DegenerateInput, EstimatorError, NonFiniteInput, ShapeError, TooFewPoints
-from .lie import (
+from gevi_cli.geometry import (
     exp_so3,
     levelling,
     log_so3,

@@ -10,7 +10,7 @@ import numpy as np
 
 from ._checks import as_covs, as_matrix, as_points, need, same_length
 from .errors import DegenerateInput
-from .lie import project_jacobian, skew
+from gevi_cli.geometry import project_jacobian, skew
 from .pnp4 import epipolar_residuals_jac
 
 

@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import DegenerateInput, NonFiniteInput, ShapeError, TooFewPoints
-from .lie import homogeneous, rot_x, rot_y, rot_z, skew
+from gevi_cli.geometry import homogeneous, rot_x, rot_y, rot_z, skew
 
 __all__ = [
     "ImageObs",

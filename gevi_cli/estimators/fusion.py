@@ -32,7 +32,7 @@ import numpy as np
 
 from ._checks import as_covs, as_matrix, as_points, finite_scalar, need, same_length
 from .errors import DegenerateInput, ShapeError
-from .lie import (
+from gevi_cli.geometry import (
     drot_z,
     exp_so3,
     project_jacobian,

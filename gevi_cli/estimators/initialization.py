@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import DegenerateInput, NonFiniteInput, ShapeError, TooFewPoints
-from .lie import exp_so3, log_so3
+from gevi_cli.geometry import exp_so3, log_so3
 from .preintegration import Preintegrated, imu_segment, preintegrate_batch
 
 __all__ = [

@@ -11,7 +11,7 @@ import scipy.linalg
 
 from ._checks import as_points, need, same_length, stereo_inputs
 from .errors import DegenerateInput
-from .lie import homogeneous, skew
+from gevi_cli.geometry import homogeneous, skew
 
 _D = np.diag([1.0, 1.0, 0.0])
 

@@ -21,7 +21,7 @@ from ._checks import (
     solve_checked,
 )
 from .errors import DegenerateInput
-from .lie import drot_z, homogeneous, rot_z, skew, wrap_angle
+from gevi_cli.geometry import drot_z, homogeneous, rot_z, skew, wrap_angle
 
 MIN_POINTS = 3
 _M1 = np.diag([1.0, 1.0, 0.0])

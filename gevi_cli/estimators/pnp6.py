@@ -15,7 +15,7 @@ import numpy as np
 
 from ._checks import as_covs, as_matrix, as_points, need, same_length, solve_checked
 from .errors import DegenerateInput, NonFiniteInput, ShapeError
-from .lie import exp_so3, project, project_jacobian, project_to_so3
+from gevi_cli.geometry import exp_so3, project, project_jacobian, project_to_so3
 
 MIN_POINTS = 6  # 11 unknowns, two rows per point
 

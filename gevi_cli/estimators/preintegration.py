@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import DegenerateInput, NonFiniteInput, ShapeError
-from .lie import exp_so3, skew
+from gevi_cli.geometry import exp_so3, skew
 
 __all__ = [
     "Increments",

@@ -14,7 +14,7 @@ from ._checks import (
     stereo_inputs,
 )
 from .errors import DegenerateInput
-from .lie import homogeneous, skew
+from gevi_cli.geometry import homogeneous, skew
 
 _EYE_SKEW = skew(np.eye(3))  # [e_j]_x for j = 0..2, shape (3, 3, 3)
 

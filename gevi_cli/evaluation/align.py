@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gevi_cli.errors import GeviError
+from gevi_cli.geometry import rot_z
 from gevi_cli.trajectory import Trajectory
 
 ALIGN_METHODS = ("none", "origin", "se3", "sim3", "posyaw")
@@ -55,11 +56,6 @@ class Alignment:
                 "yaw_deg": self.yaw_deg, "n_used": self.n_used}
 
 
-def _rot_z(theta: float) -> np.ndarray:
-    c, s = np.cos(theta), np.sin(theta)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
 def best_yaw(C: np.ndarray) -> float:
     """Yaw maximizing ``trace(R_z(theta)^T ... )`` for a 3x3 (or 2x2) matrix C = sum(g e^T)-like.
 
@@ -76,13 +72,13 @@ def posyaw_umeyama(est_xyz: np.ndarray, gt_xyz: np.ndarray) -> tuple[np.ndarray,
     mu_e, mu_g = est_xyz.mean(axis=0), gt_xyz.mean(axis=0)
     e, g = est_xyz - mu_e, gt_xyz - mu_g
     C = g[:, :2].T @ e[:, :2]  # C[i, j] = sum g_i e_j
-    R = _rot_z(best_yaw(C))
+    R = rot_z(best_yaw(C))
     return R, mu_g - R @ mu_e
 
 
 def posyaw_single(est_T0: np.ndarray, gt_T0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """4-DOF alignment from one pose pair (rpg ``align_posyaw_single``)."""
-    R = _rot_z(best_yaw(gt_T0[:3, :3] @ est_T0[:3, :3].T))
+    R = rot_z(best_yaw(gt_T0[:3, :3] @ est_T0[:3, :3].T))
     return R, gt_T0[:3, 3] - R @ est_T0[:3, 3]
 
 

@@ -74,7 +74,7 @@ def tilt_errors(est: Trajectory, gt: Trajectory, max_diff_s: float = 0.01) -> Ti
     """Tilt error of every estimated pose with a ground-truth pose within ``max_diff_s``."""
     from gevi_cli.evaluation.associate import associate
 
-    from gevi_cli.estimators.lie import tilt_angles, wrap_angle
+    from gevi_cli.geometry import tilt_angles, wrap_angle
 
     a = associate(gt, est, max_diff_s=max_diff_s)
     Re, Rg = a.est.rotations, a.gt.rotations

@@ -23,7 +23,7 @@ import numpy as np
 
 from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.frontend.config import FrontendConfig
-from gevi_cli.estimators.lie import log_so3
+from gevi_cli.geometry import log_so3
 from gevi_cli.frontend import reacquire
 from gevi_cli.frontend.affine import PatchTemplates
 from gevi_cli.frontend.derotate import apply_homography, derotate, fit_inplane, rotation_homography

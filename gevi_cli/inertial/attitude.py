@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gevi_cli import estimators as est
-from gevi_cli.estimators.lie import right_jacobian
+from gevi_cli.geometry import right_jacobian
 from gevi_cli.estimators.initialization import GRAVITY
 from gevi_cli.inertial.imu_stream import ImuNoise
 

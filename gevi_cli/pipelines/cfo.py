@@ -10,8 +10,9 @@ from __future__ import annotations
 import numpy as np
 
 from gevi_cli.frontend import FrontEnd
+from gevi_cli.geometry import make_T
 from gevi_cli.pipelines.config import OdometryConfig
-from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches, _make_T
+from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches
 from gevi_cli.pipelines.pose6 import tracked_pose6
 from gevi_cli.pipelines.verification import FivePointL1Verification
 
@@ -26,4 +27,4 @@ class CurrentFeatureOdometry(KeyframeOdometry):
     def estimate_T_ck(self, m: Matches, frame) -> np.ndarray:
         R, t, fallback = tracked_pose6(m.p, m.cov_unit * self.sigma2, m.q, self.cfg.pnp, self.sigma2, self.camera.f)
         self.fallbacks += int(fallback)
-        return _make_T(R, t)
+        return make_T(R, t)

@@ -38,12 +38,13 @@ import numpy as np
 from gevi_cli import estimators as est
 from gevi_cli.frontend import FrontEnd
 from gevi_cli.estimators.preintegration import imu_segment, integrate_increments
+from gevi_cli.geometry import make_T
 from gevi_cli.inertial.imu_stream import ImuStream
 from gevi_cli.inertial.standstill import GRAVITY
 from gevi_cli.pipelines.config import OdometryConfig
 from gevi_cli.pipelines.inertial_init import (GEVI, INIT, STANDSTILL, VISUAL, FrameSample, InertialInitialisation,
                                               tilt_of, yaw_of)
-from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches, _make_T
+from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches
 from gevi_cli.pipelines.recent_motion import RecentMotion
 from gevi_cli.pipelines.acc_bias import AccBiasTracker
 from gevi_cli.pipelines.window_gravity import WindowGravity
@@ -371,7 +372,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         if self.mode != GEVI:
             R, t, fallback = tracked_pose6(m.p, m.cov_unit * self.sigma2, m.q, self.cfg.pnp, self.sigma2, self.camera.f)
             self.fallbacks += int(fallback)
-            return _make_T(R, t)
+            return make_T(R, t)
         cov = m.cov_unit * self.sigma2
         L_k, L_c, _ = self._levelling()
         if self.cfg.fusion.mode == "bcd":
@@ -398,7 +399,7 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
                     self._restore_bcd_state(saved)
         if not np.isfinite(med) or med > pc.max_median_px:
             raise TrackingFailure(f"median reprojection error {med:.2f} px after the GeVI pose step")
-        return _make_T(R, t)
+        return make_T(R, t)
 
     def _bcd_state(self):
         """What a pose step changes besides its result: the tilts (current and window frames), Sigma."""

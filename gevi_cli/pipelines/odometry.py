@@ -21,7 +21,7 @@ import numpy as np
 
 from gevi_cli import estimators as est
 from gevi_cli.frontend import FrontEnd, Prediction
-from gevi_cli.geometry import invert_pose
+from gevi_cli.geometry import invert_pose, make_T, orthonormal_pose
 from gevi_cli.pipelines.config import OdometryConfig
 from gevi_cli.pipelines.keyframe import Keyframe, make_keyframe
 from gevi_cli.pipelines.types import BRIDGED, OK, FrameResult
@@ -56,13 +56,6 @@ class Matches:
         return Matches(self.ids[sel], self.z[sel], self.y[sel], self.q[sel], self.p[sel], self.cov_unit[sel])
 
 
-def _orthonormal(T: np.ndarray) -> np.ndarray:
-    U, _, Vt = np.linalg.svd(T[:3, :3])
-    out = T.copy()
-    out[:3, :3] = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
-    return out
-
-
 def _thin_features(obs: list, cap: int) -> list:
     """Keep at most ``cap`` feature ids in the window (evenly over the sorted ids: deterministic and
     spread over detection time, so over the image); every image keeps its observations of those."""
@@ -75,12 +68,6 @@ def _thin_features(obs: list, cap: int) -> list:
         m = np.isin(o.ids, keep, assume_unique=True)
         out.append(est.ImageObs(o.ids[m], o.xy[m]))
     return out
-
-
-def _make_T(R, t) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, :3], T[:3, 3] = R, t
-    return T
 
 
 class KeyframeOdometry:
@@ -207,7 +194,7 @@ class KeyframeOdometry:
         T_now = self.kf.T_w_k if res.keyframe else res.T_w_c
         if self.T_w_last is not None and res.status == OK:
             # re-orthonormalised: bridged poses are products of velocities, rounding must not grow
-            self.velocity = _orthonormal(invert_pose(self.T_w_last) @ T_now)
+            self.velocity = orthonormal_pose(invert_pose(self.T_w_last) @ T_now)
             self._moving = True
         self.T_w_last = T_now
         res.timings = timings
@@ -400,13 +387,13 @@ class KeyframeOdometry:
             # tracks are dominated by LK errors (fast motion blur) otherwise pull the poses off.
             p, q = self._last
             f = self.camera.f
-            T_ck_ba = invert_pose(_make_T(r.R[-1], r.t[-1]))
+            T_ck_ba = invert_pose(make_T(r.R[-1], r.t[-1]))
             T_ck_tr = invert_pose(T_k[-1])
             e_ba = reprojection_median_px(T_ck_ba[:3, :3], T_ck_ba[:3, 3], p, q, f)
             e_tr = reprojection_median_px(T_ck_tr[:3, :3], T_ck_tr[:3, 3], p, q, f)
             if e_ba > self.cfg.ba.max_reproj_ratio * e_tr + 0.05:
                 self.ba_rejected += 1
                 return None
-        refined = {f.index: kf.T_w_k @ _make_T(r.R[i], r.t[i]) for i, f in enumerate(frames)}
+        refined = {f.index: kf.T_w_k @ make_T(r.R[i], r.t[i]) for i, f in enumerate(frames)}
         self.pending = [(i, refined.get(i, T)) for i, T in self.pending]
         return refined[new.index]

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from gevi_cli.estimators.initialization import GRAVITY
-from gevi_cli.estimators.lie import exp_so3, project, rot_x, rot_y, rot_z, rtilt
+from gevi_cli.geometry import exp_so3, project, rot_x, rot_y, rot_z, rtilt
 
 F_PX = 1100.0
 IMAGE = 800
@@ -205,7 +205,7 @@ def fusion_trajectory(rng, duration=150.0, rate=100.0, sigma_a=0.02, sigma_g=1.0
     pos[1:] = np.cumsum(0.5 * (vel[1:] + vel[:-1]) * dt, axis=0)
     f_true = np.einsum("nji,nj->ni", R_wi, acc_w + np.array([0.0, 0.0, GRAVITY]))
     f_meas = f_true + sigma_a * rng.standard_normal(f_true.shape)
-    from gevi_cli.estimators.lie import log_so3
+    from gevi_cli.geometry import log_so3
 
     omega = log_so3(np.swapaxes(R_wi[:-1], 1, 2) @ R_wi[1:]) / dt
     b_g = np.asarray(b_g0, float) + np.cumsum(bias_rw * np.sqrt(dt) * rng.standard_normal((N - 1, 3)), axis=0)
@@ -252,8 +252,8 @@ def run_fusion(traj: FusionTrajectory, rng, n=200, window=0.2, R_ic=None, modes=
     accelerometer direction, see docs/estimators_notes.md).
     """
     from gevi_cli.estimators.fusion import FusionWindow, bcd_refine, propagate_tilts
-    from gevi_cli.estimators.lie import levelling
-    from gevi_cli.estimators.lie import tilt_angles as _tilt
+    from gevi_cli.geometry import levelling
+    from gevi_cli.geometry import tilt_angles as _tilt
     from gevi_cli.estimators.pnp4 import pnp4_be, pnp4_gn
     from gevi_cli.estimators.pnp6 import pnp6_be, pnp6_refine
     from gevi_cli.estimators.triangulation import triangulate

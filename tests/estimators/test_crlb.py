@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from gevi_cli.estimators import DegenerateInput, crlb4, crlb6, fisher6, triangulate
-from gevi_cli.estimators.lie import project_jacobian, skew
+from gevi_cli.geometry import project_jacobian, skew
 from gevi_cli.studies import simulation as sim
 
 

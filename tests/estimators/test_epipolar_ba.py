@@ -18,7 +18,7 @@ from gevi_cli.estimators.epipolar_ba import (
     euler_zyx_from_R,
     poses_from_tracking,
 )
-from gevi_cli.estimators.lie import rotation_error
+from gevi_cli.geometry import rotation_error
 from gevi_cli.studies.simulation import R_RL, T_RL
 from gevi_cli.studies.simulation import ba_window as make_window
 from gevi_cli.studies.simulation import perturb_ba_window as perturb

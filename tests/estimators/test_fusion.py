@@ -20,7 +20,7 @@ def test_sigma_step_is_constrained_minimiser(case):
 
     # numerical optimum over Sigma = Q diag(lam) Q^T, lam in [lo, hi] (log-parametrised)
     def f(x):
-        from gevi_cli.estimators.lie import exp_so3
+        from gevi_cli.geometry import exp_so3
 
         Q = exp_so3(x[:3])
         lam = lo + (hi - lo) / (1 + np.exp(-x[3:]))
@@ -75,7 +75,7 @@ def _window(seed=3, noise=True, t0_err=0.0):
     psi = tr.yaw[i0] - tr.yaw[i1]
     ginc = (tr.omega_meas[i0:i1] - tr.b_g_est[i0:i1]) * tr.dt
     if not noise:
-        from gevi_cli.estimators.lie import log_so3
+        from gevi_cli.geometry import log_so3
 
         ginc = log_so3(np.swapaxes(tr.R_wi[i0:i1], 1, 2) @ tr.R_wi[i0 + 1:i1 + 1])
     w = FusionWindow(p=p, cov=cov, q=s.q, sigma2=s.sigma**2, R_ic=R_ic, acc_dir=f / np.linalg.norm(f, axis=1)[:, None],
@@ -172,7 +172,7 @@ def test_fusion_adaptive_accuracy(fusion_run):
 def _random_window(rng, K, n=60):
     """A random (not noise-consistent) window: points 1-6 m in front, random covariances and
     tilts, per-link gyro variances and a Sigma prior, so every block of J is generic."""
-    from gevi_cli.estimators.lie import exp_so3
+    from gevi_cli.geometry import exp_so3
 
     R_ic = exp_so3(rng.standard_normal(3))
     p_c = np.column_stack([rng.uniform(-2, 2, (n, 2)), rng.uniform(1, 6, n)])

@@ -16,7 +16,7 @@ from gevi_cli.estimators.initialization import (
     gravity_to_R_WV,
     stereo_imu_init,
 )
-from gevi_cli.estimators.lie import exp_so3
+from gevi_cli.geometry import exp_so3
 from gevi_cli.studies.simulation import G_W, R_IC_FORWARD, SinTraj
 
 RATE = 200

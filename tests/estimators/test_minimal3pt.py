@@ -8,7 +8,7 @@ from gevi_cli.estimators import (
     ransac_iterations,
     solve_3pt_upright,
 )
-from gevi_cli.estimators.lie import homogeneous, rot_z, wrap_angle
+from gevi_cli.geometry import homogeneous, rot_z, wrap_angle
 from gevi_cli.studies import outlier_study
 from gevi_cli.studies import simulation as sim
 

@@ -23,7 +23,7 @@ from gevi_cli.estimators import (
     sampson_distances,
 )
 from gevi_cli.estimators import minimal3pt as m3
-from gevi_cli.estimators.lie import homogeneous, rot_z, skew
+from gevi_cli.geometry import homogeneous, rot_z, skew
 from gevi_cli.studies import simulation as sim
 
 # ----------------------------------------------------------------------------------- reference

@@ -17,7 +17,7 @@ from gevi_cli.estimators import (
     sigma2_onesided,
     triangulate,
 )
-from gevi_cli.estimators.lie import exp_so3, project, rotation_error
+from gevi_cli.geometry import exp_so3, project, rotation_error
 from gevi_cli.studies import montecarlo as mc
 from gevi_cli.studies import simulation as sim
 

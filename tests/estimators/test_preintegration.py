@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from gevi_cli.estimators import DegenerateInput, NonFiniteInput
-from gevi_cli.estimators.lie import exp_so3, log_so3
+from gevi_cli.geometry import exp_so3, log_so3
 from gevi_cli.estimators.preintegration import (
     imu_segment,
     integrate_increments,

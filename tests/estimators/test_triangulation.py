@@ -19,7 +19,7 @@ def test_noise_free_recovery(scene4):
 
 
 def test_noise_free_recovery_general_extrinsic(rng):
-    from gevi_cli.estimators.lie import exp_so3, project
+    from gevi_cli.geometry import exp_so3, project
 
     R_rl = exp_so3([0.02, -0.03, 0.01])
     t_rl = np.array([-0.25, 0.01, 0.02])
@@ -44,7 +44,7 @@ def test_jacobian_central_differences(scene4, central_diff):
 def test_covariance_matches_monte_carlo():
     rng = np.random.default_rng(3)
     P = np.array([[0.3, -0.2, 2.0], [0.5, 0.4, 6.0]])
-    from gevi_cli.estimators.lie import project
+    from gevi_cli.geometry import project
 
     z_o, y_o = project(P), project(P + sim.T_RL)
     sig = 2.5 / 1100
@@ -79,7 +79,7 @@ def test_tied_rows_covariance_matches_monte_carlo():
     tied first-order covariance; the untied one (four independent coordinates) averages two rows
     that are one, and under-states the vertical variance (by 9 % at 1.5 m, 4 % at 4 m here)."""
     rng = np.random.default_rng(7)
-    from gevi_cli.estimators.lie import project
+    from gevi_cli.geometry import project
 
     P = np.array([[0.4, -0.3, 1.5], [-0.6, 0.5, 4.0]])
     z_o, y_o = project(P), project(P + sim.T_RL)

@@ -23,7 +23,7 @@ from support import shared_path
 
 from gevi_cli.datasets import open_sequence
 from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
-from gevi_cli.estimators.lie import exp_so3
+from gevi_cli.geometry import exp_so3
 from gevi_cli.frontend.config import FrontendConfig
 from gevi_cli.frontend.grid import GridDetector, detect_grid
 from gevi_cli.frontend.derotate import apply_homography, fit_inplane

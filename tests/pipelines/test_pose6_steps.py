@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from gevi_cli import estimators as est
-from gevi_cli.estimators.lie import project
+from gevi_cli.geometry import project
 from gevi_cli.pipelines.config import PnPConfig
 from gevi_cli.pipelines.pose6 import estimate_pose6
 from gevi_cli.studies import simulation as sim
@@ -40,7 +40,7 @@ def floor():
     n = 200
     xy = rng.uniform(-1, 1, (n, 2))
     P = np.column_stack([xy, 2.0 + 0.05 * xy[:, 0]])
-    R, t = est.lie.exp_so3(np.array([0.02, -0.03, 0.05])), np.array([0.05, -0.02, 0.03])
+    R, t = est.exp_so3(np.array([0.02, -0.03, 0.05])), np.array([0.05, -0.02, 0.03])
     sig = 0.5 / F_PX
     z = project(P) + sig * rng.standard_normal((n, 2))
     y = project(P + sim.T_RL)

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gevi_cli.estimators.lie import exp_so3
+from gevi_cli.geometry import exp_so3
 from gevi_cli.run.folder import RunStatus
 from gevi_cli.run.session import _evaluate_tilt
 from gevi_cli.trajectory import Trajectory

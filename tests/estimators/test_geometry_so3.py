@@ -1,6 +1,6 @@
 import numpy as np
 
-from gevi_cli.estimators import lie
+from gevi_cli import geometry as lie  # SO(3) helpers live in the one geometry module
 
 
 def test_exp_log_roundtrip(rng):
