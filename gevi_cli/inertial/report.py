@@ -5,17 +5,20 @@ white-noise levels measured at standstill next to the stated densities; roll/pit
 stream from the IMU-only filter of :mod:`gevi_cli.inertial.attitude`, against ground truth when
 there is some, next to plain gyro integration and a fixed-gain complementary filter (both levelled
 from the accelerometer at the start, with the standstill gyro bias; the complementary filter at the
-best of a few gains when ground truth exists).  Units: s, rad (printed in deg), m/s^2.
+best time constant of a 1-2-5 grid, chosen on the ground truth, the grid extended past an edge that
+wins).  With no noise model stated, the filter uses the white noise measured at rest.  Units: s, rad
+(printed in deg), m/s^2.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from gevi_cli import estimators as est
-from gevi_cli.inertial.attitude import AttitudeFilterConfig, GravityAttitudeFilter, complementary, gyro_only, run_filter
-from gevi_cli.inertial.imu_stream import ImuStream
+from gevi_cli.inertial.attitude import (AttitudeFilterConfig, GravityAttitudeFilter, complementary_bank, gyro_only,
+                                        level_rotations, run_filter)
+from gevi_cli.inertial.imu_stream import ImuNoise, ImuStream
 from gevi_cli.inertial.standstill import (GRAVITY, StandstillEstimate, imu_at_rest, standstill_estimate,
                                           tilt_from_specific_force)
 
@@ -23,7 +26,50 @@ from gevi_cli.inertial.standstill import (GRAVITY, StandstillEstimate, imu_at_re
 STILL_WINDOW_S = 0.5
 #: ... whose gyro std, |a| std and | mean |a| - g | stay below these (rad/s, m/s^2, m/s^2)
 STILL_LIMITS = (0.1, 0.5, 0.5)
-COMPLEMENTARY_GAINS = (3e-4, 1e-3, 3e-3, 1e-2)
+#: the complementary baseline's time constants (s; gain 1/tau rad/s per rad of gravity-direction error,
+#: the same filter at any sample rate): a 1-2-5 series, extended by up to MAX_GRID_EXTENSION values
+#: past an edge that wins, so that the oracle's choice is a minimum, not a bound
+COMPLEMENTARY_TAUS_S = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0)
+MAX_GRID_EXTENSION = 4
+
+
+def step_125(tau: float, up: bool) -> float:
+    """The next value of the 1-2-5 series above (``up``) or below ``tau``."""
+    e = int(np.floor(np.log10(tau) + 1e-9))
+    cands = [float(f"{v}e{e + d}") for d in (-1, 0, 1) for v in (1, 2, 5)]
+    return min(c for c in cands if c > tau * (1 + 1e-9)) if up else max(c for c in cands if c < tau * (1 - 1e-9))
+
+
+@dataclass(frozen=True)
+class GridChoice:
+    """The oracle's pick on a grid: ``best`` time constant (s), its ``score``, every (tau, score) tried,
+    and ``at_edge`` when the best is still an end of the (extended) grid."""
+
+    best: float
+    score: tuple
+    tried: tuple
+    at_edge: bool
+
+
+def best_on_grid(taus, score, min_tau: float = 0.0, max_extension: int = MAX_GRID_EXTENSION) -> GridChoice:
+    """Minimise ``score(list of taus) -> list of tuples`` (first entry compared) over ``taus``; while the
+    best is an end of the grid, add the next 1-2-5 value beyond it (not below ``min_tau``), at most
+    ``max_extension`` times."""
+    grid = sorted(float(t) for t in taus)
+    scores = dict(zip(grid, score(grid)))
+    for _ in range(max_extension):
+        ordered = sorted(scores)
+        best = min(ordered, key=lambda t: scores[t][0])
+        if best == ordered[0] and step_125(best, up=False) >= min_tau:
+            new = step_125(best, up=False)
+        elif best == ordered[-1]:
+            new = step_125(best, up=True)
+        else:
+            break
+        scores[new] = score([new])[0]
+    ordered = sorted(scores)
+    best = min(ordered, key=lambda t: scores[t][0])
+    return GridChoice(best, scores[best], tuple((t, scores[t]) for t in ordered), best in (ordered[0], ordered[-1]))
 
 
 @dataclass
@@ -35,10 +81,13 @@ class ImuReport:
     standstills: list  # (start_s, end_s)
     start: StandstillEstimate | None  # the standstill the stream starts with
     noise_measured: dict  # gyro / acc white-noise density estimated at the longest standstill
-    noise_stated: dict
+    noise_stated: dict  # the dataset's densities (None where it states none)
+    noise_used: ImuNoise | None = None  # what the filter ran with
+    noise_note: str = ""  # one line: where noise_used comes from
     flags: list = field(default_factory=list)
     attitude: object = None  # AttitudeTrack of the adaptive filter
     comparison: list = field(default_factory=list)  # (name, (tilt RMSE, roll/pitch RMSE deg, tilt trend deg/min), note)
+    complementary_choice: GridChoice | None = None  # the complementary baseline's grid (with ground truth)
 
 
 def _standstills(stream: ImuStream) -> list[tuple[int, int]]:
@@ -73,9 +122,12 @@ def imu_report(stream: ImuStream, gt=None, cfg: AttitudeFilterConfig = AttitudeF
         measured = {"gyro_noise_density": float(np.mean(g[i0:i1].std(0)) * np.sqrt(stream.dt_nominal)),
                     "acc_noise_density": float(np.mean(a[i0:i1].std(0)) * np.sqrt(stream.dt_nominal)),
                     "over_s": (int(t[i1 - 1]) - int(t[i0])) * 1e-9}
-    stated = {"gyro_noise_density": stream.noise.gyro_noise_density, "acc_noise_density": stream.noise.acc_noise_density}
+    missing = set(getattr(stream, "noise_missing", ()))
+    stated = {k: (None if k in missing else getattr(stream.noise, k)) for k in ("gyro_noise_density", "acc_noise_density")}
+    noise, note = noise_model(stream, measured, standstills, still)
     flags = _flags(stream, start)
-    rep = ImuReport(len(t), (int(t[-1]) - t0) * 1e-9, stream.rate_hz, gaps, standstills, start, measured, stated, flags)
+    rep = ImuReport(len(t), (int(t[-1]) - t0) * 1e-9, stream.rate_hz, gaps, standstills, start, measured, stated,
+                    noise_used=noise, flags=flags, noise_note=note)
 
     # the attitude: levelled from the starting standstill (or the first 0.5 s of specific force)
     if start is not None:
@@ -85,11 +137,31 @@ def imu_report(stream: ImuStream, gt=None, cfg: AttitudeFilterConfig = AttitudeF
         roll, pitch = tilt_from_specific_force(a[:k].mean(0))
         b_g = np.zeros(3)
     R0 = est.rtilt(roll, pitch)
-    filt = GravityAttitudeFilter(R0, b_g, stream.noise, stream.dt_nominal, cfg)
+    filt = GravityAttitudeFilter(R0, b_g, noise, stream.dt_nominal, cfg)
     rep.attitude = run_filter(filt, t, g, a)
     if gt is not None:
         rep.comparison = _compare(rep, stream, gt, R0, b_g, cfg)
     return rep
+
+
+def noise_model(stream: ImuStream, measured: dict, standstills: list, still: list) -> tuple[ImuNoise, str]:
+    """The noise model the filter runs with and one line saying where it comes from: the dataset's where it
+    states one; where it does not, the white-noise densities measured at the longest standstill (the
+    random walks, which seconds at rest cannot measure, stay EuRoC ADIS16448's)."""
+    missing = set(getattr(stream, "noise_missing", ()))
+    if not missing:
+        return stream.noise, "noise model: as stated by the dataset"
+    measurable = {"gyro_noise_density", "acc_noise_density"} & missing
+    if not measured or not measurable:
+        return stream.noise, (f"noise model: none stated for {', '.join(sorted(missing))} and no standstill to measure "
+                              "it: EuRoC ADIS16448 values")
+    noise = replace(stream.noise, **{k: measured[k] for k in measurable})
+    i = max(range(len(still)), key=lambda j: still[j][1] - still[j][0])
+    a, b = standstills[i]
+    rest = sorted(missing - measurable)
+    return noise, (f"noise model: none stated; using the white noise measured at rest ({a:.1f}-{b:.1f} s): gyro "
+                   f"{noise.gyro_noise_density:.3g} rad/s/sqrt(Hz), acc {noise.acc_noise_density:.3g} m/s^2/sqrt(Hz)"
+                   + (f" ({', '.join(rest)}: EuRoC ADIS16448's)" if rest else ""))
 
 
 def _flags(stream: ImuStream, start: StandstillEstimate | None) -> list[str]:
@@ -128,8 +200,16 @@ def _compare(rep: ImuReport, stream: ImuStream, gt, R0, b_g, cfg) -> list:
                                   AttitudeFilterConfig(**{**cfg.__dict__, "adaptive": False}))
     trk = run_filter(fixed, t, g, a)
     rows.append(("same filter, fixed gravity weight", tilt_stats(trk.t_ns, trk.R_WI, half), "Sigma = noise floor"))
-    rows.append(("gyro-only integration", tilt_stats(t, gyro_only(R0, b_g, t, g), 0.003), "standstill gyro bias"))
-    best = min(((k, tilt_stats(t, complementary(R0, b_g, t, g, a, k), 0.003)) for k in COMPLEMENTARY_GAINS),
-               key=lambda x: x[1][0])
-    rows.append(("complementary filter, fixed gain", best[1], f"best of gains {COMPLEMENTARY_GAINS}: {best[0]:g}"))
+    near = 0.51 * stream.dt_nominal  # per-sample outputs
+    rows.append(("gyro-only integration", tilt_stats(t, gyro_only(R0, b_g, t, g), near), "standstill gyro bias"))
+
+    def scores(taus):
+        return [tilt_stats(t, level_rotations(gb), near) for gb in complementary_bank(R0, b_g, t, g, a, taus)]
+
+    ch = best_on_grid(COMPLEMENTARY_TAUS_S, scores, min_tau=stream.dt_nominal)
+    lo, hi = ch.tried[0][0], ch.tried[-1][0]
+    edge = ", AT THE GRID'S EDGE" if ch.at_edge else ""
+    rows.append(("complementary filter, fixed gain", ch.score,
+                 f"time constant {ch.best:g} s, best of {len(ch.tried)} ({lo:g}-{hi:g} s, 1-2-5){edge}"))
+    rep.complementary_choice = ch
     return rows

@@ -9,7 +9,7 @@ from gevi_cli.errors import GeviError
 
 
 def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind, groundtruth, calib, imu_calib, topics,
-                   cameras, echo=print) -> Path:
+                   cameras, imu_stride: int = 1, echo=print) -> Path:
     from gevi_cli.commands.options import sequence_kwargs
     from gevi_cli.datasets import open_sequence
     from gevi_cli.inertial.imu_stream import ImuStream
@@ -30,24 +30,47 @@ def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind,
         seq = BagImu(path, topics=topics, imu_calib=imu_calib, groundtruth=groundtruth)
         for message in seq.warnings:
             warn(message)
+    elif kind is None and is_imu_only_euroc(path):
+        from gevi_cli.datasets.euroc_imu import EurocImu
+
+        seq = EurocImu(path, groundtruth=groundtruth)
     else:
         seq = open_sequence(path, kind=kind, **sequence_kwargs(groundtruth, calib, topics, cameras, imu_calib))
     imu = seq.imu
     if imu is None or len(imu) < 2:
         raise GeviError(path, "has no IMU data" if imu is None else "has fewer than 2 IMU samples")
     offset = imu_time_offset if imu_time_offset is not None else float(getattr(seq, "imu_time_offset_s", 0.0) or 0.0)
-    stream = ImuStream.from_sequence(imu, offset, f"{path} (IMU)", warn)
+    if imu_stride > 1:
+        imu = strided_imu(imu, imu_stride)
+    stream = ImuStream.from_sequence(imu, offset, f"{path} (IMU)")  # the report says which noise model it used
     gt = seq.groundtruth
     if gt is not None and gt.frame not in ("body", "unknown"):
         warn(f"ground truth is in the {gt.frame} frame, not the body (IMU) frame: roll/pitch not compared")
         gt = None
     rep = imu_report(stream, gt)
-    run_dir = make_run_dir(out, Path(results_root), "imu", seq.name)
+    if stream.noise_missing:
+        warn(f"{path} (IMU): {rep.noise_note}")
+    run_dir = make_run_dir(out, Path(results_root), "imu", seq.name + (f"_stride{imu_stride}" if imu_stride > 1 else ""))
     _write(run_dir, stream, rep, plots)
     for line in summary_lines(rep, stream):
         echo(line)
     echo(f"wrote {run_dir}")
     return run_dir
+
+
+def is_imu_only_euroc(path: Path) -> bool:
+    """An EuRoC-layout folder with ``mav0/imu0/data.csv`` and no camera folders (``gevi simulate mav``)."""
+    from gevi_cli.datasets.euroc import find_mav0
+
+    return path.is_dir() and find_mav0(path) is None and any(
+        (c / "imu0" / "data.csv").is_file() for c in (path / "mav0", path))
+
+
+def strided_imu(imu, k: int):
+    """Every ``k``-th sample of ``imu`` (an ImuData), noise model kept: a k-times slower IMU."""
+    from dataclasses import replace
+
+    return replace(imu, t_ns=imu.t_ns[::k], gyro=imu.gyro[::k], acc=imu.acc[::k])
 
 
 def summary_lines(rep, stream) -> list[str]:
@@ -66,10 +89,15 @@ def summary_lines(rep, stream) -> list[str]:
                      f"mean |a| {s.acc_norm:.4f} m/s^2")
     if rep.noise_measured:
         m, st = rep.noise_measured, rep.noise_stated
+
+        def against(key):
+            return "none stated" if st.get(key) is None else f"stated {st[key]:.3g}, x{m[key] / st[key]:.1f}"
+
         lines.append(f"white noise at rest ({m['over_s']:.1f} s): gyro {m['gyro_noise_density']:.3g} rad/s/sqrt(Hz) "
-                     f"(stated {st['gyro_noise_density']:.3g}, x{m['gyro_noise_density'] / st['gyro_noise_density']:.1f}), "
-                     f"acc {m['acc_noise_density']:.3g} m/s^2/sqrt(Hz) (stated {st['acc_noise_density']:.3g}, "
-                     f"x{m['acc_noise_density'] / st['acc_noise_density']:.1f}); above the stated noise = vibration")
+                     f"({against('gyro_noise_density')}), acc {m['acc_noise_density']:.3g} m/s^2/sqrt(Hz) "
+                     f"({against('acc_noise_density')}); above the stated noise = vibration")
+    if rep.noise_note:
+        lines.append(rep.noise_note)
     for f in rep.flags:
         lines.append(f"flag: {f}")
     if rep.comparison:
