@@ -23,17 +23,17 @@ def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind,
     from gevi_cli.datasets.registry import detect_kind
 
     warn = lambda m: echo(f"gevi: warning: {m}", err=True)  # noqa: E731
-    if (kind or detect_kind(path)) == "rosbag" and is_bag(path):
+    if kind is None and is_imu_only_euroc(path):
+        from gevi_cli.datasets.euroc_imu import EurocImu
+
+        seq = EurocImu(path, groundtruth=groundtruth)
+    elif (kind or detect_kind(path)) == "rosbag" and is_bag(path):
         # a bag's IMU needs neither images nor a camera calibration (IMU-only bags are reports too)
         from gevi_cli.datasets.bag_imu import BagImu
 
         seq = BagImu(path, topics=topics, imu_calib=imu_calib, groundtruth=groundtruth)
         for message in seq.warnings:
             warn(message)
-    elif kind is None and is_imu_only_euroc(path):
-        from gevi_cli.datasets.euroc_imu import EurocImu
-
-        seq = EurocImu(path, groundtruth=groundtruth)
     else:
         seq = open_sequence(path, kind=kind, **sequence_kwargs(groundtruth, calib, topics, cameras, imu_calib))
     imu = seq.imu
