@@ -46,12 +46,15 @@ class AttitudeFilterConfig:
 
 @dataclass
 class AttitudeTrack:
-    """Per-update output: stamps (ns), R_WI (n, 3, 3), gyro bias (n, 3), Sigma_imu (n, 3, 3)."""
+    """Per-update output: stamps (ns), R_WI (n, 3, 3), gyro bias (n, 3), Sigma (n, 3, 3): the gravity
+    prior's Sigma_imu here, the attitude-error covariance in :mod:`.velocity_aided`, which also gives
+    the gyro scale-factor errors (n, 3) in ``scale``."""
 
     t_ns: np.ndarray
     R_WI: np.ndarray
     b_g: np.ndarray
     Sigma: np.ndarray
+    scale: np.ndarray | None = None
 
     @property
     def tilt(self) -> np.ndarray:
@@ -112,8 +115,11 @@ class GravityAttitudeFilter:
         self.b_g = self.b_g + dx[3:]
 
 
-def run_filter(filt: GravityAttitudeFilter, t_ns, gyro, acc) -> AttitudeTrack:
-    """Propagate with every sample (zero-order hold) and update once per block; output per block."""
+def run_filter(filt, t_ns, gyro, acc) -> AttitudeTrack:
+    """Propagate with every sample (zero-order hold) and update once per block; output per block.
+    A filter with its own ``run`` (:class:`~gevi_cli.inertial.velocity_aided.VelocityAidedFilter`) runs it."""
+    if hasattr(filt, "run"):
+        return filt.run(t_ns, gyro, acc)
     t = np.asarray(t_ns, dtype=np.int64)
     gyro = np.asarray(gyro, dtype=float)
     acc = np.asarray(acc, dtype=float)

@@ -19,6 +19,7 @@ from gevi_cli import estimators as est
 from gevi_cli.inertial.attitude import (AttitudeFilterConfig, GravityAttitudeFilter, complementary_bank, gyro_only,
                                         level_rotations, run_filter)
 from gevi_cli.inertial.imu_stream import ImuNoise, ImuStream
+from gevi_cli.inertial.velocity_aided import VelocityAidedConfig, VelocityAidedFilter
 from gevi_cli.inertial.standstill import (GRAVITY, StandstillEstimate, imu_at_rest, standstill_estimate,
                                           tilt_from_specific_force)
 
@@ -103,8 +104,10 @@ def _standstills(stream: ImuStream) -> list[tuple[int, int]]:
     return [(a, b) for a, b in out]
 
 
-def imu_report(stream: ImuStream, gt=None, cfg: AttitudeFilterConfig = AttitudeFilterConfig()) -> ImuReport:
-    """The whole report for ``stream``; ``gt`` an optional gravity-aligned body Trajectory."""
+def imu_report(stream: ImuStream, gt=None, cfg: VelocityAidedConfig = VelocityAidedConfig()) -> ImuReport:
+    """The whole report for ``stream``; ``gt`` an optional gravity-aligned body Trajectory.  The attitude is
+    :class:`~gevi_cli.inertial.velocity_aided.VelocityAidedFilter`'s; with ground truth, the gravity-prior
+    filter of :mod:`.attitude` (adaptive and fixed weight), gyro-only and complementary filters are compared."""
     t, g, a = stream.t_ns, stream.gyro, stream.acc
     t0 = int(t[0])
     dt = np.diff(t)
@@ -137,8 +140,7 @@ def imu_report(stream: ImuStream, gt=None, cfg: AttitudeFilterConfig = AttitudeF
         roll, pitch = tilt_from_specific_force(a[:k].mean(0))
         b_g = np.zeros(3)
     R0 = est.rtilt(roll, pitch)
-    filt = GravityAttitudeFilter(R0, b_g, noise, stream.dt_nominal, cfg)
-    rep.attitude = run_filter(filt, t, g, a)
+    rep.attitude = VelocityAidedFilter(R0, b_g, noise, stream.dt_nominal, cfg).run(t, g, a)
     if gt is not None:
         rep.comparison = _compare(rep, stream, gt, R0, b_g, cfg)
     return rep
@@ -184,7 +186,7 @@ def _traj(t_ns, R):
     return Trajectory.from_rotations(np.asarray(t_ns, dtype=np.int64), R, np.zeros((len(t_ns), 3)), frame="body")
 
 
-def _compare(rep: ImuReport, stream: ImuStream, gt, R0, b_g, cfg) -> list:
+def _compare(rep: ImuReport, stream: ImuStream, gt, R0, b_g, cfg: VelocityAidedConfig) -> list:
     from gevi_cli.evaluation.tilt import tilt_errors
 
     t, g, a = stream.t_ns, stream.gyro, stream.acc
@@ -194,12 +196,13 @@ def _compare(rep: ImuReport, stream: ImuStream, gt, R0, b_g, cfg) -> list:
         return te.rmse_deg, te.roll_pitch_rmse_deg, te.trend_deg_per_min(int(te.t_ns[0]))
 
     half = 0.51 / cfg.update_hz  # every ground-truth stamp finds a filter output
-    rows = [("adaptive gravity filter (gevi imu)", tilt_stats(rep.attitude.t_ns, rep.attitude.R_WI, half),
-             "online gyro bias, adaptive gravity-prior covariance")]
-    fixed = GravityAttitudeFilter(R0, b_g, stream.noise, stream.dt_nominal,
-                                  AttitudeFilterConfig(**{**cfg.__dict__, "adaptive": False}))
-    trk = run_filter(fixed, t, g, a)
-    rows.append(("same filter, fixed gravity weight", tilt_stats(trk.t_ns, trk.R_WI, half), "Sigma = noise floor"))
+    rows = [("velocity-aided filter (gevi imu)", tilt_stats(rep.attitude.t_ns, rep.attitude.R_WI, half),
+             "online gyro bias and scale, bounded velocity")]
+    for adaptive, name, note in ((True, "gravity-prior filter, adaptive weight", "adaptive Sigma_imu (GeVI --no-fusion)"),
+                                 (False, "gravity-prior filter, fixed weight", "Sigma = noise floor")):
+        old = GravityAttitudeFilter(R0, b_g, rep.noise_used, stream.dt_nominal, AttitudeFilterConfig(adaptive=adaptive))
+        trk = run_filter(old, t, g, a)
+        rows.append((name, tilt_stats(trk.t_ns, trk.R_WI, 0.51 / old.cfg.update_hz), note))
     near = 0.51 * stream.dt_nominal  # per-sample outputs
     rows.append(("gyro-only integration", tilt_stats(t, gyro_only(R0, b_g, t, g), near), "standstill gyro bias"))
 

@@ -119,12 +119,16 @@ def _write(run_dir: Path, stream, rep, plots: bool) -> None:
     att = rep.attitude
     roll, pitch = est.tilt_angles(att.R_WI)
     yaw = np.arctan2(att.R_WI[:, 1, 0], att.R_WI[:, 0, 0])
-    tr = np.trace(att.Sigma, axis1=1, axis2=2)
+    g = att.R_WI[:, 2, :]  # R^T e3 per row: gravity in the body frame
+    proj = np.eye(3) - g[:, :, None] * g[:, None, :]
+    tilt_std = np.sqrt(np.maximum(np.einsum("nij,njk,nki->n", proj, att.Sigma, proj), 0.0))
+    sc = att.scale if att.scale is not None else np.zeros_like(att.b_g)
     with open(run_dir / "imu_states.csv", "w") as f:
-        f.write("t_ns,roll,pitch,yaw,bgx,bgy,bgz,sigma_trace\n")  # rad, rad/s, dimensionless
+        # rad, rad/s, dimensionless scale-factor errors, rad (posterior std of the tilt)
+        f.write("t_ns,roll,pitch,yaw,bgx,bgy,bgz,sgx,sgy,sgz,tilt_std\n")
         for k in range(len(att.t_ns)):
             f.write(f"{att.t_ns[k]},{roll[k]:.9g},{pitch[k]:.9g},{yaw[k]:.9g},{att.b_g[k, 0]:.9g},{att.b_g[k, 1]:.9g},"
-                    f"{att.b_g[k, 2]:.9g},{tr[k]:.9g}\n")
+                    f"{att.b_g[k, 2]:.9g},{sc[k, 0]:.9g},{sc[k, 1]:.9g},{sc[k, 2]:.9g},{tilt_std[k]:.9g}\n")
     write_trajectory(Trajectory.from_rotations(att.t_ns, att.R_WI, np.zeros((len(att.t_ns), 3)), frame="body"),
                      run_dir / "attitude.tum", "tum")
     (run_dir / "report.md").write_text("# gevi imu\n\n" + "\n".join(summary_lines(rep, stream)) + "\n")
