@@ -1,7 +1,8 @@
 """The acceptance table of `gevi imu`'s attitude filter across regimes (issue 36, docs/studies/imu_attitude.md).
 
-Rows: euroc_micro's real IMU at 200, 100 and 50 Hz (``--imu-stride 1/2/4``) and ``gevi simulate mav``
-renders (seeds 1-3 at 50 and 200 Hz).  Each row is one ``gevi imu`` run; the table gives the tilt
+Rows: euroc_micro's real IMU at 200, 100 and 50 Hz (``--imu-stride 1/2/4``), ``gevi simulate mav``
+renders (seeds 1-3 at 50 and 200 Hz) and, for calm underwater-like motion, ``gevi simulate pool-easy
+--imu-only --duration 60`` (seeds 1-3, 200 Hz).  Each row is one ``gevi imu`` run; the table gives the tilt
 RMSE of every filter it compares and the complementary filter's chosen time constant.
 
     python scripts/imu_regimes.py [--work DIR] [--data ../shared/data] [--no-noise-model]
@@ -54,6 +55,11 @@ def main() -> None:
             if not out.is_dir():
                 gevi("simulate", "mav", out, "--imu-rate", hz, "--seed", seed, "-q", *extra)
             jobs.append((f"mav seed {seed} {hz} Hz", [out]))
+    for seed in (int(s) for s in a.seeds.split(",")):
+        out = work / f"pool_easy_s{seed}{'_nonoise' if extra else ''}"
+        if not out.is_dir():
+            gevi("simulate", "pool-easy", out, "--imu-only", "--duration", 60, "--seed", seed, *extra)
+        jobs.append((f"pool-easy seed {seed} 200 Hz", [out]))
     print("| sequence | velocity-aided (gevi imu) | gravity prior, adaptive | best complementary | its time constant |")
     print("|---|---|---|---|---|")
     for name, args in jobs:

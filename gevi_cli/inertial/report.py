@@ -30,6 +30,10 @@ STILL_LIMITS = (0.1, 0.5, 0.5)
 #: the complementary baseline's time constants (s; gain 1/tau rad/s per rad of gravity-direction error,
 #: the same filter at any sample rate): a 1-2-5 series, extended by up to MAX_GRID_EXTENSION values
 #: past an edge that wins, so that the oracle's choice is a minimum, not a bound
+#: |mean |a| at rest - g| above this (m/s^2) is flagged, and the velocity-aided filter rescales the specific force
+ACC_SCALE_LIMIT = 0.3
+#: prior std of the starting velocity (m/s) when the stream does not start at rest
+MOVING_START_VELOCITY_SIGMA = 1.0
 COMPLEMENTARY_TAUS_S = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0)
 MAX_GRID_EXTENSION = 4
 
@@ -140,10 +144,40 @@ def imu_report(stream: ImuStream, gt=None, cfg: VelocityAidedConfig = VelocityAi
         roll, pitch = tilt_from_specific_force(a[:k].mean(0))
         b_g = np.zeros(3)
     R0 = est.rtilt(roll, pitch)
-    rep.attitude = VelocityAidedFilter(R0, b_g, noise, stream.dt_nominal, cfg).run(t, g, a)
+    if start is None:  # in motion from the first sample: the starting velocity is unknown
+        cfg = replace(cfg, velocity_sigma0=MOVING_START_VELOCITY_SIGMA)
+    else:  # as uncertain as the standstill's own spread says (slow motion passes the loose IMU test)
+        tilt_spread, bias_spread = _start_spread(stream, still[0][1])
+        cfg = replace(cfg, tilt_sigma0=max(cfg.tilt_sigma0, tilt_spread), bias_sigma0=max(cfg.bias_sigma0, bias_spread))
+    rep.attitude = VelocityAidedFilter(R0, b_g, noise, stream.dt_nominal, cfg).run(t, g, _in_g(a, start))
     if gt is not None:
         rep.comparison = _compare(rep, stream, gt, R0, b_g, cfg)
     return rep
+
+
+def _start_spread(stream: ImuStream, i1: int) -> tuple[float, float]:
+    """(RMS angle (rad) of the specific-force directions of the starting standstill's STILL_WINDOW_S tiles
+    around their mean, largest per-axis RMS (rad/s) of the tiles' mean rates around theirs): what the
+    levelling and the bias from that standstill are worth when it was slow motion rather than rest."""
+    w = max(int(round(STILL_WINDOW_S / stream.dt_nominal)), 4)
+    n = (i1 // w) * w
+    if n < 2 * w:
+        return 0.0, 0.0
+    a = stream.acc[:n].reshape(-1, w, 3).mean(1)
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    m = a.mean(0)
+    m /= np.linalg.norm(m)
+    g = stream.gyro[:n].reshape(-1, w, 3).mean(1)
+    return (float(np.sqrt(np.mean(np.arccos(np.clip(a @ m, -1.0, 1.0)) ** 2))),
+            float(np.sqrt(np.mean((g - g.mean(0)) ** 2, axis=0)).max()))
+
+
+def _in_g(acc: np.ndarray, start: StandstillEstimate | None) -> np.ndarray:
+    """The specific force the velocity-aided filter integrates: rescaled to g at rest when the starting
+    standstill's mean |a| is off by more than ACC_SCALE_LIMIT (units in g, or a scale error: flagged)."""
+    if start is not None and abs(start.acc_norm - GRAVITY) > ACC_SCALE_LIMIT:
+        return acc * (GRAVITY / start.acc_norm)
+    return acc
 
 
 def noise_model(stream: ImuStream, measured: dict, standstills: list, still: list) -> tuple[ImuNoise, str]:
@@ -168,9 +202,9 @@ def noise_model(stream: ImuStream, measured: dict, standstills: list, still: lis
 
 def _flags(stream: ImuStream, start: StandstillEstimate | None) -> list[str]:
     out = []
-    if start is not None and abs(start.acc_norm - GRAVITY) > 0.3:
+    if start is not None and abs(start.acc_norm - GRAVITY) > ACC_SCALE_LIMIT:
         out.append(f"mean |specific force| at rest is {start.acc_norm:.3f} m/s^2, not 9.81: accelerometer units or "
-                   "scale wrong (g instead of m/s^2?)")
+                   "scale wrong (g instead of m/s^2?); the velocity-aided filter rescales it to 9.81")
     peak = float(np.abs(stream.gyro).max())
     if (start is not None and np.linalg.norm(start.b_g) > 0.5) or peak > 35.0:
         at_rest = f"|rate at rest| {np.linalg.norm(start.b_g):.3g} rad/s, " if start is not None else ""
@@ -197,7 +231,7 @@ def _compare(rep: ImuReport, stream: ImuStream, gt, R0, b_g, cfg: VelocityAidedC
 
     half = 0.51 / cfg.update_hz  # every ground-truth stamp finds a filter output
     rows = [("velocity-aided filter (gevi imu)", tilt_stats(rep.attitude.t_ns, rep.attitude.R_WI, half),
-             "online gyro bias and scale, bounded velocity")]
+             "online gyro bias and scale; gravity weighted by the measured acceleration; bounded velocity")]
     for adaptive, name, note in ((True, "gravity-prior filter, adaptive weight", "adaptive Sigma_imu (GeVI --no-fusion)"),
                                  (False, "gravity-prior filter, fixed weight", "Sigma = noise floor")):
         old = GravityAttitudeFilter(R0, b_g, rep.noise_used, stream.dt_nominal, AttitudeFilterConfig(adaptive=adaptive))

@@ -209,40 +209,64 @@ def mav_description(params: MavParams, imu: ImuParams, seed: int, t0_ns: int, no
     return {"generator": f"gevi {__version__} simulate", "preset": "mav",
             "description": "IMU only: aggressive multirotor flight (thrust-tilted, tilts past 60 deg, rotor vibration)",
             "seed": int(seed), "format": "euroc", "mav": asdict(params), "imu": asdict(imu),
-            "noise_model_written": bool(noise_model), "t0_ns": int(t0_ns), "gravity_W": [0.0, 0.0, -GRAVITY],
+            "t0_ns": int(t0_ns), "gravity_W": [0.0, 0.0, -GRAVITY],
             "frames_convention": "world z up; body = IMU frame"}
 
 
 def write_mav(out, params: MavParams, imu: ImuParams, seed: int, noise_model: bool = True):
-    """Write the IMU-only EuRoC folder into ``out`` (an empty folder): ``mav0/imu0/{data.csv,sensor.yaml}``,
-    ``mav0/state_groundtruth_estimate0/{data.csv,sensor.yaml}``, ``simulation.yaml``.  ``noise_model``
-    False leaves the noise densities out of ``imu0/sensor.yaml`` (a recording that states none)."""
+    """Write the mav regime's IMU-only EuRoC folder into ``out`` (see :func:`write_imu_only`)."""
+    from gevi_cli.simulate.generate import T0_NS
+
+    series, gt = mav_imu(params, imu, seed, T0_NS)
+    return write_imu_only(out, series, gt, imu, mav_description(params, imu, seed, T0_NS, noise_model), noise_model,
+                          "Simulated MAV IMU (white noise stated; rotor vibration not)")
+
+
+def write_imu_only(out, series: ImuSeries, gt: MotionSample, imu: ImuParams, description: dict, noise_model: bool,
+                   comment: str):
+    """An IMU-only EuRoC folder: ``mav0/imu0/{data.csv,sensor.yaml}``,
+    ``mav0/state_groundtruth_estimate0/{data.csv,sensor.yaml}`` (body poses at the IMU stamps) and
+    ``simulation.yaml``.  ``noise_model`` False leaves the noise densities out of ``imu0/sensor.yaml``
+    (a recording that states none)."""
     from pathlib import Path
 
     from gevi_cli.geometry import matrix_to_quat_wxyz
-    from gevi_cli.simulate.generate import T0_NS
     from gevi_cli.simulate.writers import write_simulation_yaml
     from gevi_cli.simulate.writers.euroc import GT_HEADER, IMU_HEADER, _write_rows, gt_yaml, imu_yaml
 
     out = Path(out)
-    series, gt = mav_imu(params, imu, seed, T0_NS)
     (out / "mav0" / "imu0").mkdir(parents=True)
     (out / "mav0" / "state_groundtruth_estimate0").mkdir()
     _write_rows(out / "mav0" / "imu0" / "data.csv", IMU_HEADER, series.t_ns, np.hstack([series.gyro, series.acc]))
-    text = imu_yaml(imu, "Simulated MAV IMU (white noise stated; rotor vibration not)")
+    text = imu_yaml(imu, comment)
     if not noise_model:
         text = text.split("# inertial sensor noise model")[0].rstrip() + "\n"
     (out / "mav0" / "imu0" / "sensor.yaml").write_text(text)
     _write_rows(out / "mav0" / "state_groundtruth_estimate0" / "data.csv", GT_HEADER, series.t_ns,
                 np.hstack([gt.p_W, matrix_to_quat_wxyz(gt.R_WB), gt.v_W, series.bias_gyro, series.bias_acc]))
     (out / "mav0" / "state_groundtruth_estimate0" / "sensor.yaml").write_text(gt_yaml())
-    write_simulation_yaml(out / "simulation.yaml", mav_description(params, imu, seed, T0_NS, noise_model))
+    write_simulation_yaml(out / "simulation.yaml", {**description, "noise_model_written": bool(noise_model)})
     return out
 
 
-def simulate_mav(out_dir, params: MavParams, imu: ImuParams, seed: int, noise_model: bool = True,
-                 overwrite: bool = False):
-    """:func:`write_mav` into ``out_dir`` with the output-folder rules of
+def write_preset_imu(out, config, noise_model: bool = True):
+    """The IMU and ground truth of an image preset's render (``config``: a
+    :class:`~gevi_cli.simulate.generate.SimulationConfig`) without its images: the same motion and IMU
+    samples as the full render of the same options."""
+    from gevi_cli.simulate.generate import build_sequence
+
+    seq = build_sequence(config)
+    desc = seq.description("euroc")
+    desc = {k: desc[k] for k in ("generator", "preset", "description", "seed", "options", "imu", "t0_ns", "gravity_W",
+                                 "frames_convention")}
+    desc["format"] = "euroc-imu-only"
+    return write_imu_only(out, seq.imu, seq.groundtruth, seq.config.imu, desc, noise_model,
+                          f"Simulated {config.preset} IMU (IMU only)")
+
+
+def simulate_imu_only(out_dir, write, overwrite: bool = False):
+    """``write(folder)`` (:func:`write_mav` or :func:`write_preset_imu` bound to their arguments) into ``out_dir``
+    with the output-folder rules of
     :func:`~gevi_cli.simulate.generate.simulate` (empty or absent; ``overwrite`` only a previous render),
     written into a sibling temporary folder and renamed into place when complete."""
     import os
@@ -268,7 +292,7 @@ def simulate_mav(out_dir, params: MavParams, imu: ImuParams, seed: int, noise_mo
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)
     try:
-        write_mav(tmp / "seq", params, imu, seed, noise_model)
+        write(tmp / "seq")
         if out.exists():
             shutil.rmtree(out)
         os.rename(tmp / "seq", out)
