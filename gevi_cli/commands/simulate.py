@@ -8,6 +8,7 @@ import click
 from gevi_cli.errors import GeviError
 
 PRESET_NAMES = ("pool-easy", "pool-hard", "euroc-like", "kitti-like", "kitti-highway", "mav")
+MAV_MIN_DURATION_S = 20.0
 #: options that only concern images: refused with the IMU-only mav preset
 IMAGE_OPTIONS = ("--rate", "--resolution", "--baseline", "--no-distortion", "--no-image-noise", "--supersample",
                  "--workers", "--name")
@@ -83,7 +84,8 @@ def command(preset, out_dir, fmt, duration, rate, resolution, baseline, seed, im
     `gevi imu OUT_DIR` reads): 60 s of aggressive multirotor flight (8 s still start, 5 s still end),
     the body tilted with the thrust plus roll/pitch excursions (tilts past 60 deg, --a-max default 6
     m/s^2), rotor vibration as 70-180 Hz band-limited noise (0.05 rad/s, 0.6 m/s^2 per axis RMS in flight,
-    a quarter at rest) on top of the white noise.  imu0/sensor.yaml states the white noise only (as a
+    a quarter at rest) on top of the white noise, 1 % gyro scale-factor errors and a gyro-bias shift at
+    take-off; --duration at least 20 s.  imu0/sensor.yaml states the white noise only (as a
     datasheet would); --no-noise-model leaves it out.  The same seed is the same flight at any --imu-rate.
     --imu-only writes any preset that way (its motion and IMU exactly as in the full render, no images).
     """
@@ -111,6 +113,11 @@ def command(preset, out_dir, fmt, duration, rate, resolution, baseline, seed, im
                         acc_noise_density=acc_noise, acc_random_walk=acc_walk)
         if preset == "mav":
             params = MavParams(**{k: v for k, v in (("duration_s", duration), ("a_max", a_max)) if v is not None})
+            if params.duration_s < MAV_MIN_DURATION_S:
+                raise GeviError("--duration", f"mav needs at least {MAV_MIN_DURATION_S:g} s (8 s still start, 5 s "
+                                              f"still end, 2 s ramps each way), got {params.duration_s:g}")
+            if not params.a_max < 9.0:
+                raise GeviError("--a-max", f"mav's thrust must point up: below 9 m/s^2, got {params.a_max:g}")
             if no_imu_noise:  # a perfect IMU: no white noise, no biases, no vibration, no scale error
                 imu = imu.noise_free()
                 params = MavParams(**{**params.__dict__, "vib_gyro": 0.0, "vib_acc": 0.0, "gyro_scale": 0.0,

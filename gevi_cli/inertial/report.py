@@ -2,8 +2,9 @@
 
 Rate and gaps; standstill intervals; the gyro bias and gravity direction of the starting standstill;
 white-noise levels measured at standstill next to the stated densities; roll/pitch over the whole
-stream from the IMU-only filter of :mod:`gevi_cli.inertial.attitude`, against ground truth when
-there is some, next to plain gyro integration and a fixed-gain complementary filter (both levelled
+stream from the IMU-only filter of :mod:`gevi_cli.inertial.velocity_aided`, against ground truth when
+there is some, next to the gravity-prior filter of :mod:`gevi_cli.inertial.attitude` (GeVI's), plain
+gyro integration and a fixed-gain complementary filter (both levelled
 from the accelerometer at the start, with the standstill gyro bias; the complementary filter at the
 best time constant of a 1-2-5 grid, chosen on the ground truth, the grid extended past an edge that
 wins).  With no noise model stated, the filter uses the white noise measured at rest.  Units: s, rad
@@ -27,13 +28,13 @@ from gevi_cli.inertial.standstill import (GRAVITY, StandstillEstimate, imu_at_re
 STILL_WINDOW_S = 0.5
 #: ... whose gyro std, |a| std and | mean |a| - g | stay below these (rad/s, m/s^2, m/s^2)
 STILL_LIMITS = (0.1, 0.5, 0.5)
-#: the complementary baseline's time constants (s; gain 1/tau rad/s per rad of gravity-direction error,
-#: the same filter at any sample rate): a 1-2-5 series, extended by up to MAX_GRID_EXTENSION values
-#: past an edge that wins, so that the oracle's choice is a minimum, not a bound
 #: |mean |a| at rest - g| above this (m/s^2) is flagged, and the velocity-aided filter rescales the specific force
 ACC_SCALE_LIMIT = 0.3
 #: prior std of the starting velocity (m/s) when the stream does not start at rest
 MOVING_START_VELOCITY_SIGMA = 1.0
+#: the complementary baseline's time constants (s; gain 1/tau rad/s per rad of gravity-direction error,
+#: the same filter at any sample rate): a 1-2-5 series, extended by up to MAX_GRID_EXTENSION values
+#: past an edge that wins, so that the oracle's choice is a minimum, not a bound
 COMPLEMENTARY_TAUS_S = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0)
 MAX_GRID_EXTENSION = 4
 
@@ -90,7 +91,7 @@ class ImuReport:
     noise_used: ImuNoise | None = None  # what the filter ran with
     noise_note: str = ""  # one line: where noise_used comes from
     flags: list = field(default_factory=list)
-    attitude: object = None  # AttitudeTrack of the adaptive filter
+    attitude: object = None  # AttitudeTrack of the velocity-aided filter
     comparison: list = field(default_factory=list)  # (name, (tilt RMSE, roll/pitch RMSE deg, tilt trend deg/min), note)
     complementary_choice: GridChoice | None = None  # the complementary baseline's grid (with ground truth)
 

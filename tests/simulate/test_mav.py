@@ -97,7 +97,8 @@ def test_render_without_noise_model_uses_the_one_measured_at_rest(tmp_path, caps
     assert err.count("noise model: none stated") == 1  # said once, as a warning, besides the report line
 
 
-@pytest.mark.parametrize("args, where", [(["--format", "kitti"], "--format"), (["--resolution", "64x48"], "--resolution")])
+@pytest.mark.parametrize("args, where", [(["--format", "kitti"], "--format"), (["--resolution", "64x48"], "--resolution"),
+                                         (["--duration", "10"], "--duration"), (["--a-max", "12"], "--a-max")])
 def test_imu_only_output_refuses_image_options(tmp_path, capsys, args, where):
     code, _, err = run_cli(["simulate", "mav", tmp_path / "x", *args], capsys)
     assert code == 2 and err.startswith(f"gevi: error: {where}") and len(err.strip().splitlines()) == 1
