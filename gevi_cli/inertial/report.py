@@ -157,9 +157,10 @@ def imu_report(stream: ImuStream, gt=None, cfg: VelocityAidedConfig = VelocityAi
 
 
 def _start_spread(stream: ImuStream, i1: int) -> tuple[float, float]:
-    """(RMS angle (rad) of the specific-force directions of the starting standstill's STILL_WINDOW_S tiles
-    around their mean, largest per-axis RMS (rad/s) of the tiles' mean rates around theirs): what the
-    levelling and the bias from that standstill are worth when it was slow motion rather than rest."""
+    """What the levelling and the bias from the starting standstill are worth when it was slow motion
+    rather than rest, from its STILL_WINDOW_S tiles: the RMS angle (rad) of their specific-force
+    directions around the mean (the levelling is the start's tilt, which is one of them) and the
+    standard error (rad/s, largest axis) of the mean rate over the tiles (the bias is that mean)."""
     w = max(int(round(STILL_WINDOW_S / stream.dt_nominal)), 4)
     n = (i1 // w) * w
     if n < 2 * w:
@@ -170,7 +171,7 @@ def _start_spread(stream: ImuStream, i1: int) -> tuple[float, float]:
     m /= np.linalg.norm(m)
     g = stream.gyro[:n].reshape(-1, w, 3).mean(1)
     return (float(np.sqrt(np.mean(np.arccos(np.clip(a @ m, -1.0, 1.0)) ** 2))),
-            float(np.sqrt(np.mean((g - g.mean(0)) ** 2, axis=0)).max()))
+            float(np.sqrt(np.mean((g - g.mean(0)) ** 2, axis=0) / len(g)).max()))
 
 
 def _in_g(acc: np.ndarray, start: StandstillEstimate | None) -> np.ndarray:
