@@ -62,7 +62,7 @@ class VelocityAidedConfig:
 
     update_hz: float = 50.0  # updates per second (their covariances follow the block length)
     velocity_psd: float = 0.25  # q_v [m^2/s]: e.g. 0.5 m/s RMS decorrelating within 0.5 s (docs/studies/imu_attitude.md)
-    accel_corr_s: float = 4.0  # tau_a [s]: correlation time of the horizontal non-gravitational acceleration
+    accel_corr_s: float = 8.0  # tau_a [s]: correlation time of the horizontal non-gravitational acceleration
     accel_window_s: float = 10.0  # sigma_a^2 over this window [s] ...
     accel_short_s: float = 1.0  # ... or over this one when larger [s]
     accel_sub_s: float = 0.25  # of means of R a - g e3 over this [s] (vibration averaged out)
