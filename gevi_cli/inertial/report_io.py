@@ -95,7 +95,8 @@ def summary_lines(rep, stream) -> list[str]:
 
         lines.append(f"white noise at rest ({m['over_s']:.1f} s): gyro {m['gyro_noise_density']:.3g} rad/s/sqrt(Hz) "
                      f"({against('gyro_noise_density')}), acc {m['acc_noise_density']:.3g} m/s^2/sqrt(Hz) "
-                     f"({against('acc_noise_density')}); above the stated noise = vibration")
+                     f"({against('acc_noise_density')})"
+                     + ("; above the stated noise = vibration" if any(v is not None for v in st.values()) else ""))
     if rep.noise_note:
         lines.append(rep.noise_note)
     for f in rep.flags:
