@@ -231,7 +231,7 @@ def plot_summary(out_dir: Path, table) -> list[Path]:
 
 
 def plot_imu_states(csv_path: Path, png_path: Path) -> Path:
-    """Roll/pitch/yaw (deg), gyro bias and sqrt(tr Sigma_imu) over time from an ``imu_states.csv``
+    """Roll/pitch/yaw (deg), gyro bias and sqrt(tr Sigma_imu) (`gevi imu`: the tilt std) over time from an ``imu_states.csv``
     (written by `gevi run --method gevi` and `gevi imu`; angles rad, bias rad/s)."""
     import pandas as pd
 
@@ -246,8 +246,12 @@ def plot_imu_states(csv_path: Path, png_path: Path) -> Path:
         ax[1].plot(t, s[k], label=k, lw=0.9)
     ax[1].set_ylabel("gyro bias [rad/s]")
     ax[1].legend(loc="upper right")
-    ax[2].semilogy(t, np.degrees(np.sqrt(s.sigma_trace.to_numpy(float))), lw=0.9)
-    ax[2].set_ylabel("sqrt tr Sigma_imu [deg]")
+    if "tilt_std" in s.columns:  # `gevi imu`: the velocity-aided filter's posterior tilt std
+        ax[2].semilogy(t, np.degrees(s.tilt_std.to_numpy(float)), lw=0.9)
+        ax[2].set_ylabel("tilt std [deg]")
+    else:
+        ax[2].semilogy(t, np.degrees(np.sqrt(s.sigma_trace.to_numpy(float))), lw=0.9)
+        ax[2].set_ylabel("sqrt tr Sigma_imu [deg]")
     ax[2].set_xlabel("time [s]")
     fig.savefig(png_path, dpi=100)
     return Path(png_path)

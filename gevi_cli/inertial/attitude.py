@@ -46,12 +46,15 @@ class AttitudeFilterConfig:
 
 @dataclass
 class AttitudeTrack:
-    """Per-update output: stamps (ns), R_WI (n, 3, 3), gyro bias (n, 3), Sigma_imu (n, 3, 3)."""
+    """Per-update output: stamps (ns), R_WI (n, 3, 3), gyro bias (n, 3), Sigma (n, 3, 3): the gravity
+    prior's Sigma_imu here, the attitude-error covariance in :mod:`.velocity_aided`, which also gives
+    the gyro scale-factor errors (n, 3) in ``scale``."""
 
     t_ns: np.ndarray
     R_WI: np.ndarray
     b_g: np.ndarray
     Sigma: np.ndarray
+    scale: np.ndarray | None = None
 
     @property
     def tilt(self) -> np.ndarray:
@@ -112,8 +115,11 @@ class GravityAttitudeFilter:
         self.b_g = self.b_g + dx[3:]
 
 
-def run_filter(filt: GravityAttitudeFilter, t_ns, gyro, acc) -> AttitudeTrack:
-    """Propagate with every sample (zero-order hold) and update once per block; output per block."""
+def run_filter(filt, t_ns, gyro, acc) -> AttitudeTrack:
+    """Propagate with every sample (zero-order hold) and update once per block; output per block.
+    A filter with its own ``run`` (:class:`~gevi_cli.inertial.velocity_aided.VelocityAidedFilter`) runs it."""
+    if hasattr(filt, "run"):
+        return filt.run(t_ns, gyro, acc)
     t = np.asarray(t_ns, dtype=np.int64)
     gyro = np.asarray(gyro, dtype=float)
     acc = np.asarray(acc, dtype=float)
@@ -145,21 +151,42 @@ def gyro_only(R_WI0: np.ndarray, b_g: np.ndarray, t_ns, gyro) -> np.ndarray:
     return out
 
 
-def complementary(R_WI0: np.ndarray, b_g: np.ndarray, t_ns, gyro, acc, gain: float) -> np.ndarray:
-    """Fixed-gain complementary filter: gyro propagation, then per sample a rotation of ``gain`` times
-    the angle between the predicted and the measured gravity direction.  R_WI per sample (n, 3, 3)."""
+def complementary_bank(R_WI0: np.ndarray, b_g: np.ndarray, t_ns, gyro, acc, taus_s) -> np.ndarray:
+    """Fixed-gain complementary filters, one per time constant in ``taus_s`` (s), run side by side.
+
+    Per sample ``k -> k+1`` the gravity direction in the body frame ``g = R_WI^T e3`` is carried by the
+    gyro (``g <- Exp((w_k - b_g) dt)^T g``, the zero-order hold of :func:`run_filter`) and then turned
+    toward the measured unit specific force ``a`` by the angle ``(dt / tau) |g x a|`` (a Mahony
+    proportional term with gain ``1 / tau`` rad/s per rad: the same filter at any sample rate).  The
+    turn is applied as ``g + k (a - (g.a) g)``, renormalised (``k = dt / tau`` <= 1; it differs from the
+    exact rotation by O(k^3)).  Returns ``g`` per filter and sample, (len(taus), n, 3), unit vectors.
+    Only ``g`` is propagated: roll and pitch depend on nothing else, and the filters stay cheap (one
+    (G, 3) step per sample for the whole grid)."""
     t = np.asarray(t_ns, dtype=np.int64)
     dts = np.diff(t) * 1e-9
-    gyro = np.asarray(gyro, dtype=float)
-    acc = np.asarray(acc, dtype=float)
-    dR = est.exp_so3((gyro[:-1] - b_g) * dts[:, None])
-    a_dir = acc / np.linalg.norm(acc, axis=1, keepdims=True)
-    out = np.empty((len(t), 3, 3))
-    out[0] = R = np.asarray(R_WI0, dtype=float)
+    dR = est.exp_so3((np.asarray(gyro, dtype=float)[:-1] - b_g) * dts[:, None])
+    a = np.asarray(acc, dtype=float)
+    a_dir = a / np.linalg.norm(a, axis=1, keepdims=True)
+    k_all = np.minimum(dts[:, None] / np.asarray(taus_s, dtype=float)[None, :], 1.0)[:, :, None]  # (n-1, G, 1)
+    g = np.tile(np.asarray(R_WI0, dtype=float)[2], (len(k_all[0]), 1))  # R^T e3 = third row of R
+    out = np.empty((len(t), len(g), 3))
+    out[0] = g
     for k in range(len(dts)):
-        R = R @ dR[k]
-        g_B = R.T @ E3
-        # body-frame rotation that turns g_B toward a_dir (small-angle: g_B x a_dir)
-        R = R @ est.exp_so3(-gain * np.cross(g_B, a_dir[k + 1]))
-        out[k + 1] = R
-    return out
+        g = g @ dR[k]  # (dR^T g^T)^T for every row
+        ak = a_dir[k + 1]
+        g = g + k_all[k] * (ak - (g @ ak)[:, None] * g)
+        g /= np.sqrt(np.einsum("ij,ij->i", g, g))[:, None]
+        out[k + 1] = g
+    return out.transpose(1, 0, 2)
+
+
+def level_rotations(g_B: np.ndarray) -> np.ndarray:
+    """Yaw-free ``R_WI = Ry(pitch) Rx(roll)`` (n, 3, 3) whose ``R^T e3`` is the unit vector ``g_B`` (n, 3)."""
+    g = np.asarray(g_B, dtype=float)
+    return est.rtilt(np.arctan2(g[:, 1], g[:, 2]), -np.arcsin(np.clip(g[:, 0], -1.0, 1.0)))
+
+
+def complementary(R_WI0: np.ndarray, b_g: np.ndarray, t_ns, gyro, acc, tau_s: float) -> np.ndarray:
+    """One complementary filter of :func:`complementary_bank` with time constant ``tau_s`` (s): the
+    yaw-free R_WI per sample (n, 3, 3)."""
+    return level_rotations(complementary_bank(R_WI0, b_g, t_ns, gyro, acc, [tau_s])[0])

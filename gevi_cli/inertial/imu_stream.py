@@ -71,6 +71,7 @@ class ImuStream:
         self.source = source
         self.dt_nominal = float(np.median(np.diff(self.t_ns))) * 1e-9
         self.max_gap_ns = int(max_gap_factor * self.dt_nominal * 1e9)
+        self.noise_missing: tuple[str, ...] = ()  # the noise keys the dataset did not state (defaults used)
 
     @classmethod
     def from_sequence(cls, imu, time_offset_s: float, source: str, warn=None, max_gap_factor: float = IMU_GAP_FACTOR) -> "ImuStream":
@@ -84,7 +85,9 @@ class ImuStream:
             values[key] = float(v)
         if missing and warn is not None:
             warn(f"{source}: no IMU noise given for {', '.join(missing)}; using EuRoC ADIS16448 values")
-        return cls(imu.t_ns, imu.gyro, imu.acc, ImuNoise(**values), time_offset_s, source, max_gap_factor)
+        stream = cls(imu.t_ns, imu.gyro, imu.acc, ImuNoise(**values), time_offset_s, source, max_gap_factor)
+        stream.noise_missing = tuple(missing)
+        return stream
 
     @property
     def rate_hz(self) -> float:

@@ -2,20 +2,25 @@
 
 Rate and gaps; standstill intervals; the gyro bias and gravity direction of the starting standstill;
 white-noise levels measured at standstill next to the stated densities; roll/pitch over the whole
-stream from the IMU-only filter of :mod:`gevi_cli.inertial.attitude`, against ground truth when
-there is some, next to plain gyro integration and a fixed-gain complementary filter (both levelled
+stream from the IMU-only filter of :mod:`gevi_cli.inertial.velocity_aided`, against ground truth when
+there is some, next to the gravity-prior filter of :mod:`gevi_cli.inertial.attitude` (GeVI's), plain
+gyro integration and a fixed-gain complementary filter (both levelled
 from the accelerometer at the start, with the standstill gyro bias; the complementary filter at the
-best of a few gains when ground truth exists).  Units: s, rad (printed in deg), m/s^2.
+best time constant of a 1-2-5 grid, chosen on the ground truth, the grid extended past an edge that
+wins).  With no noise model stated, the filter uses the white noise measured at rest.  Units: s, rad
+(printed in deg), m/s^2.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from gevi_cli import estimators as est
-from gevi_cli.inertial.attitude import AttitudeFilterConfig, GravityAttitudeFilter, complementary, gyro_only, run_filter
-from gevi_cli.inertial.imu_stream import ImuStream
+from gevi_cli.inertial.attitude import (AttitudeFilterConfig, GravityAttitudeFilter, complementary_bank, gyro_only,
+                                        level_rotations, run_filter)
+from gevi_cli.inertial.imu_stream import ImuNoise, ImuStream
+from gevi_cli.inertial.velocity_aided import VelocityAidedConfig, VelocityAidedFilter
 from gevi_cli.inertial.standstill import (GRAVITY, StandstillEstimate, imu_at_rest, standstill_estimate,
                                           tilt_from_specific_force)
 
@@ -23,7 +28,54 @@ from gevi_cli.inertial.standstill import (GRAVITY, StandstillEstimate, imu_at_re
 STILL_WINDOW_S = 0.5
 #: ... whose gyro std, |a| std and | mean |a| - g | stay below these (rad/s, m/s^2, m/s^2)
 STILL_LIMITS = (0.1, 0.5, 0.5)
-COMPLEMENTARY_GAINS = (3e-4, 1e-3, 3e-3, 1e-2)
+#: |mean |a| at rest - g| above this (m/s^2) is flagged, and the velocity-aided filter rescales the specific force
+ACC_SCALE_LIMIT = 0.3
+#: prior std of the starting velocity (m/s) when the stream does not start at rest
+MOVING_START_VELOCITY_SIGMA = 1.0
+#: the complementary baseline's time constants (s; gain 1/tau rad/s per rad of gravity-direction error,
+#: the same filter at any sample rate): a 1-2-5 series, extended by up to MAX_GRID_EXTENSION values
+#: past an edge that wins, so that the oracle's choice is a minimum, not a bound
+COMPLEMENTARY_TAUS_S = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0)
+MAX_GRID_EXTENSION = 4
+
+
+def step_125(tau: float, up: bool) -> float:
+    """The next value of the 1-2-5 series above (``up``) or below ``tau``."""
+    e = int(np.floor(np.log10(tau) + 1e-9))
+    cands = [float(f"{v}e{e + d}") for d in (-1, 0, 1) for v in (1, 2, 5)]
+    return min(c for c in cands if c > tau * (1 + 1e-9)) if up else max(c for c in cands if c < tau * (1 - 1e-9))
+
+
+@dataclass(frozen=True)
+class GridChoice:
+    """The oracle's pick on a grid: ``best`` time constant (s), its ``score``, every (tau, score) tried,
+    and ``at_edge`` when the best is still an end of the (extended) grid."""
+
+    best: float
+    score: tuple
+    tried: tuple
+    at_edge: bool
+
+
+def best_on_grid(taus, score, min_tau: float = 0.0, max_extension: int = MAX_GRID_EXTENSION) -> GridChoice:
+    """Minimise ``score(list of taus) -> list of tuples`` (first entry compared) over ``taus``; while the
+    best is an end of the grid, add the next 1-2-5 value beyond it (not below ``min_tau``), at most
+    ``max_extension`` times."""
+    grid = sorted(float(t) for t in taus)
+    scores = dict(zip(grid, score(grid)))
+    for _ in range(max_extension):
+        ordered = sorted(scores)
+        best = min(ordered, key=lambda t: scores[t][0])
+        if best == ordered[0] and step_125(best, up=False) >= min_tau:
+            new = step_125(best, up=False)
+        elif best == ordered[-1]:
+            new = step_125(best, up=True)
+        else:
+            break
+        scores[new] = score([new])[0]
+    ordered = sorted(scores)
+    best = min(ordered, key=lambda t: scores[t][0])
+    return GridChoice(best, scores[best], tuple((t, scores[t]) for t in ordered), best in (ordered[0], ordered[-1]))
 
 
 @dataclass
@@ -35,10 +87,13 @@ class ImuReport:
     standstills: list  # (start_s, end_s)
     start: StandstillEstimate | None  # the standstill the stream starts with
     noise_measured: dict  # gyro / acc white-noise density estimated at the longest standstill
-    noise_stated: dict
+    noise_stated: dict  # the dataset's densities (None where it states none)
+    noise_used: ImuNoise | None = None  # what the filter ran with
+    noise_note: str = ""  # one line: where noise_used comes from
     flags: list = field(default_factory=list)
-    attitude: object = None  # AttitudeTrack of the adaptive filter
+    attitude: object = None  # AttitudeTrack of the velocity-aided filter
     comparison: list = field(default_factory=list)  # (name, (tilt RMSE, roll/pitch RMSE deg, tilt trend deg/min), note)
+    complementary_choice: GridChoice | None = None  # the complementary baseline's grid (with ground truth)
 
 
 def _standstills(stream: ImuStream) -> list[tuple[int, int]]:
@@ -54,8 +109,10 @@ def _standstills(stream: ImuStream) -> list[tuple[int, int]]:
     return [(a, b) for a, b in out]
 
 
-def imu_report(stream: ImuStream, gt=None, cfg: AttitudeFilterConfig = AttitudeFilterConfig()) -> ImuReport:
-    """The whole report for ``stream``; ``gt`` an optional gravity-aligned body Trajectory."""
+def imu_report(stream: ImuStream, gt=None, cfg: VelocityAidedConfig = VelocityAidedConfig()) -> ImuReport:
+    """The whole report for ``stream``; ``gt`` an optional gravity-aligned body Trajectory.  The attitude is
+    :class:`~gevi_cli.inertial.velocity_aided.VelocityAidedFilter`'s; with ground truth, the gravity-prior
+    filter of :mod:`.attitude` (adaptive and fixed weight), gyro-only and complementary filters are compared."""
     t, g, a = stream.t_ns, stream.gyro, stream.acc
     t0 = int(t[0])
     dt = np.diff(t)
@@ -73,9 +130,12 @@ def imu_report(stream: ImuStream, gt=None, cfg: AttitudeFilterConfig = AttitudeF
         measured = {"gyro_noise_density": float(np.mean(g[i0:i1].std(0)) * np.sqrt(stream.dt_nominal)),
                     "acc_noise_density": float(np.mean(a[i0:i1].std(0)) * np.sqrt(stream.dt_nominal)),
                     "over_s": (int(t[i1 - 1]) - int(t[i0])) * 1e-9}
-    stated = {"gyro_noise_density": stream.noise.gyro_noise_density, "acc_noise_density": stream.noise.acc_noise_density}
+    missing = set(getattr(stream, "noise_missing", ()))
+    stated = {k: (None if k in missing else getattr(stream.noise, k)) for k in ("gyro_noise_density", "acc_noise_density")}
+    noise, note = noise_model(stream, measured, standstills, still)
     flags = _flags(stream, start)
-    rep = ImuReport(len(t), (int(t[-1]) - t0) * 1e-9, stream.rate_hz, gaps, standstills, start, measured, stated, flags)
+    rep = ImuReport(len(t), (int(t[-1]) - t0) * 1e-9, stream.rate_hz, gaps, standstills, start, measured, stated,
+                    noise_used=noise, flags=flags, noise_note=note)
 
     # the attitude: levelled from the starting standstill (or the first 0.5 s of specific force)
     if start is not None:
@@ -85,18 +145,68 @@ def imu_report(stream: ImuStream, gt=None, cfg: AttitudeFilterConfig = AttitudeF
         roll, pitch = tilt_from_specific_force(a[:k].mean(0))
         b_g = np.zeros(3)
     R0 = est.rtilt(roll, pitch)
-    filt = GravityAttitudeFilter(R0, b_g, stream.noise, stream.dt_nominal, cfg)
-    rep.attitude = run_filter(filt, t, g, a)
+    if start is None:  # in motion from the first sample: the starting velocity is unknown
+        cfg = replace(cfg, velocity_sigma0=MOVING_START_VELOCITY_SIGMA)
+    else:  # as uncertain as the standstill's own spread says (slow motion passes the loose IMU test)
+        tilt_spread, bias_spread = _start_spread(stream, still[0][1])
+        cfg = replace(cfg, tilt_sigma0=max(cfg.tilt_sigma0, tilt_spread), bias_sigma0=max(cfg.bias_sigma0, bias_spread))
+    rep.attitude = VelocityAidedFilter(R0, b_g, noise, stream.dt_nominal, cfg).run(t, g, _in_g(a, start))
     if gt is not None:
         rep.comparison = _compare(rep, stream, gt, R0, b_g, cfg)
     return rep
 
 
+def _start_spread(stream: ImuStream, i1: int) -> tuple[float, float]:
+    """What the levelling and the bias from the starting standstill are worth when it was slow motion
+    rather than rest, from its STILL_WINDOW_S tiles: the RMS angle (rad) of their specific-force
+    directions around the mean (the levelling is the start's tilt, which is one of them) and the
+    standard error (rad/s, largest axis) of the mean rate over the tiles (the bias is that mean)."""
+    w = max(int(round(STILL_WINDOW_S / stream.dt_nominal)), 4)
+    n = (i1 // w) * w
+    if n < 2 * w:
+        return 0.0, 0.0
+    a = stream.acc[:n].reshape(-1, w, 3).mean(1)
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    m = a.mean(0)
+    m /= np.linalg.norm(m)
+    g = stream.gyro[:n].reshape(-1, w, 3).mean(1)
+    return (float(np.sqrt(np.mean(np.arccos(np.clip(a @ m, -1.0, 1.0)) ** 2))),
+            float(np.sqrt(np.mean((g - g.mean(0)) ** 2, axis=0) / len(g)).max()))
+
+
+def _in_g(acc: np.ndarray, start: StandstillEstimate | None) -> np.ndarray:
+    """The specific force the velocity-aided filter integrates: rescaled to g at rest when the starting
+    standstill's mean |a| is off by more than ACC_SCALE_LIMIT (units in g, or a scale error: flagged)."""
+    if start is not None and abs(start.acc_norm - GRAVITY) > ACC_SCALE_LIMIT:
+        return acc * (GRAVITY / start.acc_norm)
+    return acc
+
+
+def noise_model(stream: ImuStream, measured: dict, standstills: list, still: list) -> tuple[ImuNoise, str]:
+    """The noise model the filter runs with and one line saying where it comes from: the dataset's where it
+    states one; where it does not, the white-noise densities measured at the longest standstill (the
+    random walks, which seconds at rest cannot measure, stay EuRoC ADIS16448's)."""
+    missing = set(getattr(stream, "noise_missing", ()))
+    if not missing:
+        return stream.noise, "noise model: as stated by the dataset"
+    measurable = {"gyro_noise_density", "acc_noise_density"} & missing
+    if not measured or not measurable:
+        return stream.noise, (f"noise model: none stated for {', '.join(sorted(missing))} and no standstill to measure "
+                              "it: EuRoC ADIS16448 values")
+    noise = replace(stream.noise, **{k: measured[k] for k in measurable})
+    i = max(range(len(still)), key=lambda j: still[j][1] - still[j][0])
+    a, b = standstills[i]
+    rest = sorted(missing - measurable)
+    return noise, (f"noise model: none stated; using the white noise measured at rest ({a:.1f}-{b:.1f} s): gyro "
+                   f"{noise.gyro_noise_density:.3g} rad/s/sqrt(Hz), acc {noise.acc_noise_density:.3g} m/s^2/sqrt(Hz)"
+                   + (f" ({', '.join(rest)}: EuRoC ADIS16448's)" if rest else ""))
+
+
 def _flags(stream: ImuStream, start: StandstillEstimate | None) -> list[str]:
     out = []
-    if start is not None and abs(start.acc_norm - GRAVITY) > 0.3:
+    if start is not None and abs(start.acc_norm - GRAVITY) > ACC_SCALE_LIMIT:
         out.append(f"mean |specific force| at rest is {start.acc_norm:.3f} m/s^2, not 9.81: accelerometer units or "
-                   "scale wrong (g instead of m/s^2?)")
+                   "scale wrong (g instead of m/s^2?); the velocity-aided filter rescales it to 9.81")
     peak = float(np.abs(stream.gyro).max())
     if (start is not None and np.linalg.norm(start.b_g) > 0.5) or peak > 35.0:
         at_rest = f"|rate at rest| {np.linalg.norm(start.b_g):.3g} rad/s, " if start is not None else ""
@@ -112,7 +222,7 @@ def _traj(t_ns, R):
     return Trajectory.from_rotations(np.asarray(t_ns, dtype=np.int64), R, np.zeros((len(t_ns), 3)), frame="body")
 
 
-def _compare(rep: ImuReport, stream: ImuStream, gt, R0, b_g, cfg) -> list:
+def _compare(rep: ImuReport, stream: ImuStream, gt, R0, b_g, cfg: VelocityAidedConfig) -> list:
     from gevi_cli.evaluation.tilt import tilt_errors
 
     t, g, a = stream.t_ns, stream.gyro, stream.acc
@@ -122,14 +232,23 @@ def _compare(rep: ImuReport, stream: ImuStream, gt, R0, b_g, cfg) -> list:
         return te.rmse_deg, te.roll_pitch_rmse_deg, te.trend_deg_per_min(int(te.t_ns[0]))
 
     half = 0.51 / cfg.update_hz  # every ground-truth stamp finds a filter output
-    rows = [("adaptive gravity filter (gevi imu)", tilt_stats(rep.attitude.t_ns, rep.attitude.R_WI, half),
-             "online gyro bias, adaptive gravity-prior covariance")]
-    fixed = GravityAttitudeFilter(R0, b_g, stream.noise, stream.dt_nominal,
-                                  AttitudeFilterConfig(**{**cfg.__dict__, "adaptive": False}))
-    trk = run_filter(fixed, t, g, a)
-    rows.append(("same filter, fixed gravity weight", tilt_stats(trk.t_ns, trk.R_WI, half), "Sigma = noise floor"))
-    rows.append(("gyro-only integration", tilt_stats(t, gyro_only(R0, b_g, t, g), 0.003), "standstill gyro bias"))
-    best = min(((k, tilt_stats(t, complementary(R0, b_g, t, g, a, k), 0.003)) for k in COMPLEMENTARY_GAINS),
-               key=lambda x: x[1][0])
-    rows.append(("complementary filter, fixed gain", best[1], f"best of gains {COMPLEMENTARY_GAINS}: {best[0]:g}"))
+    rows = [("velocity-aided filter (gevi imu)", tilt_stats(rep.attitude.t_ns, rep.attitude.R_WI, half),
+             "online gyro bias and scale; gravity weighted by the measured acceleration; bounded velocity")]
+    for adaptive, name, note in ((True, "gravity-prior filter, adaptive weight", "adaptive Sigma_imu (GeVI --no-fusion)"),
+                                 (False, "gravity-prior filter, fixed weight", "Sigma = noise floor")):
+        old = GravityAttitudeFilter(R0, b_g, rep.noise_used, stream.dt_nominal, AttitudeFilterConfig(adaptive=adaptive))
+        trk = run_filter(old, t, g, a)
+        rows.append((name, tilt_stats(trk.t_ns, trk.R_WI, 0.51 / old.cfg.update_hz), note))
+    near = 0.51 * stream.dt_nominal  # per-sample outputs
+    rows.append(("gyro-only integration", tilt_stats(t, gyro_only(R0, b_g, t, g), near), "standstill gyro bias"))
+
+    def scores(taus):
+        return [tilt_stats(t, level_rotations(gb), near) for gb in complementary_bank(R0, b_g, t, g, a, taus)]
+
+    ch = best_on_grid(COMPLEMENTARY_TAUS_S, scores, min_tau=stream.dt_nominal)
+    lo, hi = ch.tried[0][0], ch.tried[-1][0]
+    edge = ", AT THE GRID'S EDGE" if ch.at_edge else ""
+    rows.append(("complementary filter, fixed gain", ch.score,
+                 f"time constant {ch.best:g} s, best of {len(ch.tried)} ({lo:g}-{hi:g} s, 1-2-5){edge}"))
+    rep.complementary_choice = ch
     return rows

@@ -9,7 +9,7 @@ from gevi_cli.errors import GeviError
 
 
 def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind, groundtruth, calib, imu_calib, topics,
-                   cameras, echo=print) -> Path:
+                   cameras, imu_stride: int = 1, echo=print) -> Path:
     from gevi_cli.commands.options import sequence_kwargs
     from gevi_cli.datasets import open_sequence
     from gevi_cli.inertial.imu_stream import ImuStream
@@ -23,7 +23,11 @@ def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind,
     from gevi_cli.datasets.registry import detect_kind
 
     warn = lambda m: echo(f"gevi: warning: {m}", err=True)  # noqa: E731
-    if (kind or detect_kind(path)) == "rosbag" and is_bag(path):
+    if kind is None and is_imu_only_euroc(path):
+        from gevi_cli.datasets.euroc_imu import EurocImu
+
+        seq = EurocImu(path, groundtruth=groundtruth)
+    elif (kind or detect_kind(path)) == "rosbag" and is_bag(path):
         # a bag's IMU needs neither images nor a camera calibration (IMU-only bags are reports too)
         from gevi_cli.datasets.bag_imu import BagImu
 
@@ -36,18 +40,37 @@ def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind,
     if imu is None or len(imu) < 2:
         raise GeviError(path, "has no IMU data" if imu is None else "has fewer than 2 IMU samples")
     offset = imu_time_offset if imu_time_offset is not None else float(getattr(seq, "imu_time_offset_s", 0.0) or 0.0)
-    stream = ImuStream.from_sequence(imu, offset, f"{path} (IMU)", warn)
+    if imu_stride > 1:
+        imu = strided_imu(imu, imu_stride)
+    stream = ImuStream.from_sequence(imu, offset, f"{path} (IMU)")  # the report says which noise model it used
     gt = seq.groundtruth
     if gt is not None and gt.frame not in ("body", "unknown"):
         warn(f"ground truth is in the {gt.frame} frame, not the body (IMU) frame: roll/pitch not compared")
         gt = None
     rep = imu_report(stream, gt)
-    run_dir = make_run_dir(out, Path(results_root), "imu", seq.name)
+    if stream.noise_missing:
+        warn(f"{path} (IMU): {rep.noise_note}")
+    run_dir = make_run_dir(out, Path(results_root), "imu", seq.name + (f"_stride{imu_stride}" if imu_stride > 1 else ""))
     _write(run_dir, stream, rep, plots)
     for line in summary_lines(rep, stream):
         echo(line)
     echo(f"wrote {run_dir}")
     return run_dir
+
+
+def is_imu_only_euroc(path: Path) -> bool:
+    """An EuRoC-layout folder with ``mav0/imu0/data.csv`` and no camera folders (``gevi simulate mav``)."""
+    from gevi_cli.datasets.euroc import find_mav0
+
+    return path.is_dir() and find_mav0(path) is None and any(
+        (c / "imu0" / "data.csv").is_file() for c in (path / "mav0", path))
+
+
+def strided_imu(imu, k: int):
+    """Every ``k``-th sample of ``imu`` (an ImuData), noise model kept: a k-times slower IMU."""
+    from dataclasses import replace
+
+    return replace(imu, t_ns=imu.t_ns[::k], gyro=imu.gyro[::k], acc=imu.acc[::k])
 
 
 def summary_lines(rep, stream) -> list[str]:
@@ -66,10 +89,16 @@ def summary_lines(rep, stream) -> list[str]:
                      f"mean |a| {s.acc_norm:.4f} m/s^2")
     if rep.noise_measured:
         m, st = rep.noise_measured, rep.noise_stated
+
+        def against(key):
+            return "none stated" if st.get(key) is None else f"stated {st[key]:.3g}, x{m[key] / st[key]:.1f}"
+
         lines.append(f"white noise at rest ({m['over_s']:.1f} s): gyro {m['gyro_noise_density']:.3g} rad/s/sqrt(Hz) "
-                     f"(stated {st['gyro_noise_density']:.3g}, x{m['gyro_noise_density'] / st['gyro_noise_density']:.1f}), "
-                     f"acc {m['acc_noise_density']:.3g} m/s^2/sqrt(Hz) (stated {st['acc_noise_density']:.3g}, "
-                     f"x{m['acc_noise_density'] / st['acc_noise_density']:.1f}); above the stated noise = vibration")
+                     f"({against('gyro_noise_density')}), acc {m['acc_noise_density']:.3g} m/s^2/sqrt(Hz) "
+                     f"({against('acc_noise_density')})"
+                     + ("; above the stated noise = vibration" if any(v is not None for v in st.values()) else ""))
+    if rep.noise_note:
+        lines.append(rep.noise_note)
     for f in rep.flags:
         lines.append(f"flag: {f}")
     if rep.comparison:
@@ -91,12 +120,16 @@ def _write(run_dir: Path, stream, rep, plots: bool) -> None:
     att = rep.attitude
     roll, pitch = est.tilt_angles(att.R_WI)
     yaw = np.arctan2(att.R_WI[:, 1, 0], att.R_WI[:, 0, 0])
-    tr = np.trace(att.Sigma, axis1=1, axis2=2)
+    g = att.R_WI[:, 2, :]  # R^T e3 per row: gravity in the body frame
+    proj = np.eye(3) - g[:, :, None] * g[:, None, :]
+    tilt_std = np.sqrt(np.maximum(np.einsum("nij,njk,nki->n", proj, att.Sigma, proj), 0.0))
+    sc = att.scale if att.scale is not None else np.zeros_like(att.b_g)
     with open(run_dir / "imu_states.csv", "w") as f:
-        f.write("t_ns,roll,pitch,yaw,bgx,bgy,bgz,sigma_trace\n")  # rad, rad/s, dimensionless
+        # rad, rad/s, dimensionless scale-factor errors, rad (posterior std of the tilt)
+        f.write("t_ns,roll,pitch,yaw,bgx,bgy,bgz,sgx,sgy,sgz,tilt_std\n")
         for k in range(len(att.t_ns)):
             f.write(f"{att.t_ns[k]},{roll[k]:.9g},{pitch[k]:.9g},{yaw[k]:.9g},{att.b_g[k, 0]:.9g},{att.b_g[k, 1]:.9g},"
-                    f"{att.b_g[k, 2]:.9g},{tr[k]:.9g}\n")
+                    f"{att.b_g[k, 2]:.9g},{sc[k, 0]:.9g},{sc[k, 1]:.9g},{sc[k, 2]:.9g},{tilt_std[k]:.9g}\n")
     write_trajectory(Trajectory.from_rotations(att.t_ns, att.R_WI, np.zeros((len(att.t_ns), 3)), frame="body"),
                      run_dir / "attitude.tum", "tum")
     (run_dir / "report.md").write_text("# gevi imu\n\n" + "\n".join(summary_lines(rep, stream)) + "\n")

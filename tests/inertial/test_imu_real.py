@@ -39,28 +39,48 @@ def test_standstill_gyro_bias_and_gravity(euroc, window_s):
     assert angle < 0.65
 
 
+def _rows(out: str, col: int = 2) -> dict:
+    return {line.split("|")[1].strip(): float(line.split("|")[col]) for line in out.splitlines()
+            if line.startswith("| ") and "RMSE" not in line}
+
+
 @pytest.mark.slow
 def test_gevi_imu_report_over_the_whole_stream(tmp_path, capsys):
-    """Tilt RMSE of the adaptive IMU-only filter <= 1.2 deg over 145.6 s (gravity-direction angle), and
-    better than gyro-only integration and the best fixed-gain complementary filter, measured alike."""
+    """Tilt RMSE of the velocity-aided IMU-only filter over 145.6 s (gravity-direction angle): no worse than
+    the adaptive gravity-prior filter it replaced in `gevi imu` (1.04 deg), and better than gyro-only
+    integration and the best fixed-gain complementary filter (its time constant inside the grid)."""
     root = shared_path("euroc_micro")
     code, out, err = run_cli(["imu", root, "--gt", root / "groundtruth" / "V1_01_easy.csv", "-o", tmp_path / "imu",
                               "--no-plots"], capsys)
     assert code == 0, err
-    rows = {line.split("|")[1].strip(): float(line.split("|")[2]) for line in out.splitlines()
-            if line.startswith("| ") and "RMSE" not in line}
-    ours = rows["adaptive gravity filter (gevi imu)"]
-    assert ours <= 1.2
+    rows = _rows(out)
+    ours = rows["velocity-aided filter (gevi imu)"]
+    assert ours <= 1.04
     assert ours < rows["gyro-only integration"] and ours < rows["complementary filter, fixed gain"]
-    assert ours < rows["same filter, fixed gravity weight"]
+    assert ours < rows["gravity-prior filter, adaptive weight"] < rows["gravity-prior filter, fixed weight"]
+    assert "time constant 5 s, best of 12 (0.1-500 s, 1-2-5) |" in out  # not at the grid's edge
     # the trend column: gyro-only integration drifts (the standstill bias's ~1e-3 rad/s error integrates,
-    # about 3 deg/min at most), the gravity-anchored filter does not (a tenth of gyro-only's lower bound)
-    trend = {line.split("|")[1].strip(): float(line.split("|")[4]) for line in out.splitlines()
-             if line.startswith("| ") and "RMSE" not in line}
+    # about 3 deg/min at most), the gravity-anchored filters do not (a tenth of gyro-only's lower bound)
+    trend = _rows(out, 4)
     assert trend["gyro-only integration"] > 1.0
-    assert abs(trend["adaptive gravity filter (gevi imu)"]) < 0.1
+    assert abs(trend["velocity-aided filter (gevi imu)"]) < 0.1
     assert "starting standstill" in out and "white noise at rest" in out and "200.0 Hz" in out
+    assert "noise model: as stated by the dataset" in out
     att = (tmp_path / "imu" / "attitude.tum").read_text().splitlines()
     assert len(att) > 7000 and all(float(x) == 0.0 for x in att[-1].split()[1:4])
     states = pd.read_csv(tmp_path / "imu" / "imu_states.csv")
-    assert {"roll", "pitch", "bgx", "sigma_trace"} <= set(states.columns)
+    assert {"roll", "pitch", "bgx", "sgx", "tilt_std"} <= set(states.columns)
+
+
+@pytest.mark.slow
+def test_gevi_imu_at_50_hz(tmp_path, capsys):
+    """--imu-stride 4 (every 4th sample: a 50 Hz IMU): the velocity-aided filter still beats the best
+    complementary time constant, which is inside the grid."""
+    root = shared_path("euroc_micro")
+    code, out, err = run_cli(["imu", root, "--gt", root / "groundtruth" / "V1_01_easy.csv", "-o", tmp_path / "imu",
+                              "--no-plots", "--imu-stride", "4"], capsys)
+    assert code == 0, err
+    assert "7280 samples, 145.6 s at 50.0 Hz" in out
+    rows = _rows(out)
+    assert rows["velocity-aided filter (gevi imu)"] <= rows["complementary filter, fixed gain"]
+    assert "EDGE" not in out
