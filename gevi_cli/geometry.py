@@ -10,6 +10,8 @@ dimensions where noted.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.spatial.transform import Rotation
 
@@ -280,3 +282,18 @@ def orthonormal_pose(T: np.ndarray) -> np.ndarray:
     out = T.copy()
     out[:3, :3] = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
     return out
+
+
+def exp_so3_and_jr(phi) -> tuple[np.ndarray, np.ndarray]:
+    """``Exp(phi)`` and the right Jacobian ``J_r(phi)`` of one rotation vector (3,), together (series
+    below 1e-4 rad): the per-sample step of the IMU filters, where batched calls cost more than the math."""
+    th2 = float(phi @ phi)
+    K = skew(phi)
+    K2 = K @ K
+    if th2 < 1e-8:
+        a, b, c = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0, 1.0 / 6.0 - th2 / 120.0
+    else:
+        th = math.sqrt(th2)
+        s, co = math.sin(th), math.cos(th)
+        a, b, c = s / th, (1.0 - co) / th2, (th - s) / (th2 * th)
+    return np.eye(3) + a * K + b * K2, np.eye(3) - b * K + c * K2

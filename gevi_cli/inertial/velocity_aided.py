@@ -44,13 +44,13 @@ motion tilts that axis).  No Euler angles anywhere.  Units: rad, s, m, m/s, m/s^
 """
 from __future__ import annotations
 
-import math
 from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
 from gevi_cli.estimators.initialization import GRAVITY
+from gevi_cli.geometry import exp_so3_and_jr, skew
 from gevi_cli.inertial.imu_stream import ImuNoise
 
 E3 = np.array([0.0, 0.0, 1.0])
@@ -70,24 +70,6 @@ class VelocityAidedConfig:
     bias_sigma0: float = 5e-3  # prior std of the initial gyro bias around its estimate (rad/s)
     tilt_sigma0: float = 0.01  # prior std of the initial tilt (rad)
     velocity_sigma0: float = 0.05  # prior std of the initial velocity (m/s; the filter starts at rest)
-
-
-def _skew(v) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-def _exp_and_jr(phi) -> tuple[np.ndarray, np.ndarray]:
-    """``Exp(phi)`` and the right Jacobian ``J_r(phi)`` of SO(3) (series below 1e-4 rad)."""
-    th2 = float(phi @ phi)
-    K = _skew(phi)
-    K2 = K @ K
-    if th2 < 1e-8:
-        a, b, c = 1.0 - th2 / 6.0, 0.5 - th2 / 24.0, 1.0 / 6.0 - th2 / 120.0
-    else:
-        th = math.sqrt(th2)
-        s, co = math.sin(th), math.cos(th)
-        a, b, c = s / th, (1.0 - co) / th2, (th - s) / (th2 * th)
-    return np.eye(3) + a * K + b * K2, np.eye(3) - b * K + c * K2
 
 
 class VelocityAidedFilter:
@@ -114,13 +96,13 @@ class VelocityAidedFilter:
     def propagate(self, w_meas: np.ndarray, a_meas: np.ndarray, dt: float) -> None:
         wb = np.asarray(w_meas, dtype=float) - self.b_g
         phi = wb * (1.0 - self.scale) * dt
-        dR, Jr = _exp_and_jr(phi)
+        dR, Jr = exp_so3_and_jr(phi)
         a = np.asarray(a_meas, dtype=float) - self.b_a
         F = np.eye(12)
         F[:3, :3] = dR.T
         F[:3, 3:6] = -Jr * ((1.0 - self.scale) * dt)
         F[:3, 6:9] = -Jr * (wb * dt)
-        F[9:, :3] = -self.R @ _skew(a) * dt
+        F[9:, :3] = -self.R @ skew(a) * dt
         a_W = self.R @ a - GRAVITY * E3
         self.v = self.v + a_W * dt
         self._sub_dv += a_W * dt
@@ -152,7 +134,7 @@ class VelocityAidedFilter:
             r = a / np.linalg.norm(a) - g_B
             var = max(2.0 * cfg.accel_corr_s * self.accel_var / GRAVITY**2 / max(T_block, 1e-9), self.dir_floor)
             H = np.zeros((3, 12))
-            H[:, :3] = _skew(g_B)
+            H[:, :3] = skew(g_B)
             self._correct(H, r, var)
         self._blk_acc, self._blk_n = np.zeros(3), 0
         H = np.zeros((3, 12))
@@ -166,7 +148,7 @@ class VelocityAidedFilter:
         dx = K @ r
         I_KH = np.eye(12) - K @ H
         self.P = I_KH @ self.P @ I_KH.T + var * (K @ K.T)  # Joseph form
-        dR, _ = _exp_and_jr(dx[:3])
+        dR, _ = exp_so3_and_jr(dx[:3])
         self.R = self.R @ dR
         self.b_g = self.b_g + dx[3:6]
         self.scale = self.scale + dx[6:9]

@@ -27,6 +27,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
+from gevi_cli.geometry import rot_x, rot_y, rot_z
 from gevi_cli.simulate.imu import GRAVITY, ImuParams, ImuSeries, synthesize_imu
 from gevi_cli.simulate.motion import MotionSample, Sines, Smoothstep
 
@@ -63,27 +64,6 @@ class MavParams:
     vib_band_hz: tuple[float, float] = (70.0, 180.0)
     gyro_scale: float = 0.01
     gyro_bias_flight: float = 0.005
-
-
-def _rot_z(a):
-    c, s = np.cos(a), np.sin(a)
-    R = np.zeros(np.shape(a) + (3, 3))
-    R[..., 0, 0], R[..., 0, 1], R[..., 1, 0], R[..., 1, 1], R[..., 2, 2] = c, -s, s, c, 1.0
-    return R
-
-
-def _rot_y(a):
-    c, s = np.cos(a), np.sin(a)
-    R = np.zeros(np.shape(a) + (3, 3))
-    R[..., 0, 0], R[..., 0, 2], R[..., 2, 0], R[..., 2, 2], R[..., 1, 1] = c, s, -s, c, 1.0
-    return R
-
-
-def _rot_x(a):
-    c, s = np.cos(a), np.sin(a)
-    R = np.zeros(np.shape(a) + (3, 3))
-    R[..., 1, 1], R[..., 1, 2], R[..., 2, 1], R[..., 2, 2], R[..., 0, 0] = c, -s, s, c, 1.0
-    return R
 
 
 def _align_e3(z):
@@ -135,7 +115,7 @@ class MavMotion:
         z = a_W + np.array([0.0, 0.0, GRAVITY])
         z /= np.linalg.norm(z, axis=1, keepdims=True)
         roll, pitch, yaw = (self._faded(F, t)[0] for F in (*self.tilt, self.yaw))
-        return _align_e3(z) @ _rot_z(yaw) @ _rot_y(pitch) @ _rot_x(roll)
+        return _align_e3(z) @ rot_z(yaw) @ rot_y(pitch) @ rot_x(roll)
 
     def _accel(self, t):
         P = [self._faded(F, t) for F in self.pos]
