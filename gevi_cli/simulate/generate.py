@@ -322,12 +322,28 @@ def simulate(config: SimulationConfig, out_dir, fmt: str = "euroc", *, overwrite
     For "kitti" the returned path is ``out_dir/sequences/00``.
     Raises :class:`gevi_cli.errors.GeviError` for unusable output folders.
     """
-    import shutil
-    import tempfile
+    from pathlib import Path
+
+    from gevi_cli.simulate.writers import get_writer
+
+    out = output_folder(out_dir, overwrite)
+    if fmt == "kitti" and config.distortion:
+        config = replace(config, distortion=False)  # KITTI images are rectified and undistorted
+    seq = build_sequence(config)
+    writer = get_writer(fmt)
+    kwargs = {"name": name} if fmt == "bag" else {}
+    result, tmp = into_place(out, lambda folder: writer(seq, folder, progress=progress, workers=workers, **kwargs))
+    if fmt == "kitti":
+        return out / "sequences" / "00"  # the folder a KITTI reader opens
+    return out / Path(result).relative_to(tmp) if Path(result) != tmp else out
+
+
+def output_folder(out_dir, overwrite: bool):
+    """``out_dir`` as a Path once it may be written: absent or empty, or with ``overwrite`` a previous
+    ``gevi simulate`` output (it holds ``simulation.yaml``); else a one-line GeviError."""
     from pathlib import Path
 
     from gevi_cli.errors import GeviError
-    from gevi_cli.simulate.writers import get_writer
 
     out = Path(out_dir)
     if out.exists():
@@ -339,24 +355,28 @@ def simulate(config: SimulationConfig, out_dir, fmt: str = "euroc", *, overwrite
             if not (out / "simulation.yaml").is_file():
                 raise GeviError(out, "is not a `gevi simulate` output (no simulation.yaml); refusing to delete it "
                                      "with --overwrite, remove it yourself or choose another folder")
-    if fmt == "kitti" and config.distortion:
-        config = replace(config, distortion=False)  # KITTI images are rectified and undistorted
-    seq = build_sequence(config)
+    return out
+
+
+def into_place(out, write):
+    """``write(folder)`` into a temporary sibling of ``out``, renamed into place when it returns (an
+    interrupted render leaves no half-written ``out``).  Returns (what ``write`` returned, the
+    temporary folder's name, for paths inside it)."""
+    import shutil
+    import tempfile
+    from pathlib import Path
+
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)  # mkdtemp creates 0700
     try:
-        writer = get_writer(fmt)
-        kwargs = {"name": name} if fmt == "bag" else {}
-        result = writer(seq, tmp, progress=progress, workers=workers, **kwargs)
+        result = write(tmp)
         if out.exists():
             shutil.rmtree(out)
         os.rename(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    if fmt == "kitti":
-        return out / "sequences" / "00"  # the folder a KITTI reader opens
-    return out / Path(result).relative_to(tmp) if Path(result) != tmp else out
+    return result, tmp

@@ -246,36 +246,11 @@ def write_preset_imu(out, config, noise_model: bool = True):
 
 def simulate_imu_only(out_dir, write, overwrite: bool = False):
     """``write(folder)`` (:func:`write_mav` or :func:`write_preset_imu` bound to their arguments) into ``out_dir``
-    with the output-folder rules of
-    :func:`~gevi_cli.simulate.generate.simulate` (empty or absent; ``overwrite`` only a previous render),
-    written into a sibling temporary folder and renamed into place when complete."""
-    import os
-    import shutil
-    import tempfile
-    from pathlib import Path
+    with the output-folder rules of :func:`~gevi_cli.simulate.generate.simulate` (empty or absent;
+    ``overwrite`` only a previous render), written into a sibling temporary folder and renamed into
+    place when complete.  Returns the folder."""
+    from gevi_cli.simulate.generate import into_place, output_folder
 
-    from gevi_cli.errors import GeviError
-
-    out = Path(out_dir)
-    if out.exists():
-        if not out.is_dir():
-            raise GeviError(out, "exists and is not a folder; choose another output folder")
-        if any(out.iterdir()):
-            if not overwrite:
-                raise GeviError(out, "exists and is not empty; pass --overwrite to replace it")
-            if not (out / "simulation.yaml").is_file():
-                raise GeviError(out, "is not a `gevi simulate` output (no simulation.yaml); refusing to delete it "
-                                     "with --overwrite, remove it yourself or choose another folder")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.partial-", dir=out.parent))
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o777 & ~umask)
-    try:
-        write(tmp / "seq")
-        if out.exists():
-            shutil.rmtree(out)
-        os.rename(tmp / "seq", out)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    out = output_folder(out_dir, overwrite)
+    into_place(out, write)
     return out
