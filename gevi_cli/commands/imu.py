@@ -40,7 +40,7 @@ def command(sequence, out, results_root, imu_time_offset, no_plots, imu_stride, 
       gevi imu ../shared/data/euroc_micro --gt ../shared/data/euroc_micro/groundtruth/V1_01_easy.csv
       gevi imu ../shared/data/euroc_micro --gt ../shared/data/euroc_micro/groundtruth/V1_01_easy.csv --imu-stride 4
     """
-    from gevi_cli.inertial.report_io import run_imu_report
+    from gevi_cli.run.imu import run_imu_report
 
     run_imu_report(sequence, out=out, results_root=results_root, imu_time_offset=imu_time_offset, plots=not no_plots,
                    kind=kind, groundtruth=groundtruth, calib=calib, imu_calib=imu_calib, topics=topics,

@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import click
 
-from gevi_cli.commands.options import add_sequence_options, sequence_kwargs
+from gevi_cli.commands.options import add_sequence_options
+from gevi_cli.datasets.registry import sequence_kwargs
 
 
 @click.command("info")

@@ -21,25 +21,3 @@ def add_sequence_options(func):
     for option in reversed(sequence_options):
         func = option(func)
     return func
-
-
-def sequence_kwargs(groundtruth=None, calib=None, topics=None, cameras=None, imu_calib=None) -> dict:
-    """Reader options from the CLI values (only those given)."""
-    from gevi_cli.errors import GeviError
-
-    options = {}
-    if groundtruth is not None:
-        import pathlib
-
-        if not pathlib.Path(groundtruth).is_file():
-            raise GeviError("--gt", f"{groundtruth}: no such file")
-        options["groundtruth"] = groundtruth
-    if calib is not None:
-        options["calib"] = calib
-    if imu_calib is not None:
-        options["imu_calib"] = imu_calib
-    if topics is not None:
-        options["topics"] = topics
-    if cameras is not None:
-        options["cameras"] = cameras
-    return options

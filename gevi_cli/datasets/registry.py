@@ -75,3 +75,26 @@ def open_sequence(path: str | Path, kind: str | None = None, **options):
             flag = "--" + key.replace("_", "-")
             raise GeviError(flag, f"does not apply to {kind} sequences ({path})")
     return reader(Path(path), **options)
+
+
+def sequence_kwargs(groundtruth=None, calib=None, topics=None, cameras=None, imu_calib=None) -> dict:
+    """The readers' options (``open_sequence(path, **options)``) from the command-line values, only those
+    given; a ground-truth file that does not exist is a one-line GeviError."""
+    from gevi_cli.errors import GeviError
+
+    options = {}
+    if groundtruth is not None:
+        import pathlib
+
+        if not pathlib.Path(groundtruth).is_file():
+            raise GeviError("--gt", f"{groundtruth}: no such file")
+        options["groundtruth"] = groundtruth
+    if calib is not None:
+        options["calib"] = calib
+    if imu_calib is not None:
+        options["imu_calib"] = imu_calib
+    if topics is not None:
+        options["topics"] = topics
+    if cameras is not None:
+        options["cameras"] = cameras
+    return options

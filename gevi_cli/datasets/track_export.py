@@ -35,7 +35,7 @@ import numpy as np
 
 from gevi_cli.datasets.kitti import read_calib
 from gevi_cli.errors import DataError, GeviError, LayoutError
-from gevi_cli.frontend.types import FeatureObs, RectifiedStereo, StereoObs
+from gevi_cli.observations import FeatureObs, RectifiedStereo, StereoObs
 from gevi_cli.trajectory import Trajectory, read_trajectory
 from gevi_cli.trajectory.formats import read_text
 from gevi_cli.trajectory.trajectory import KITTI_NOMINAL_PERIOD_NS

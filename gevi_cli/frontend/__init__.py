@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from gevi_cli.frontend.types import FeatureObs, Prediction, RectifiedStereo, StereoObs
+from gevi_cli.observations import FeatureObs, Prediction, RectifiedStereo, StereoObs
 
 
 class FrontEnd(Protocol):

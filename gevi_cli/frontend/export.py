@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from gevi_cli.datasets.track_export import TrackExport, TrackFrame
 from gevi_cli.errors import GeviError
-from gevi_cli.frontend.types import FeatureObs, RectifiedStereo, StereoObs
+from gevi_cli.observations import FeatureObs, RectifiedStereo, StereoObs
 
 
 class ExportFrontEnd:

@@ -32,7 +32,7 @@ from gevi_cli.frontend.klt import Pyramid, build_pyramid, in_image, track_lk, tr
 from gevi_cli.frontend.rectify import Rectifier
 from gevi_cli.frontend.shading import remove_shading
 from gevi_cli.frontend.stereo import match_stereo
-from gevi_cli.frontend.types import FeatureObs, Prediction, RectifiedStereo, StereoObs
+from gevi_cli.observations import FeatureObs, Prediction, RectifiedStereo, StereoObs
 
 STAGES = ("rectify", "pyramid", "derotate", "lk", "affine", "detect", "stereo", "reacquire")
 

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 
 from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
-from gevi_cli.frontend.types import RectifiedStereo
+from gevi_cli.observations import RectifiedStereo
 
 _TOL = 1e-9
 

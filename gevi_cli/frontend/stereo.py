@@ -28,7 +28,7 @@ import numpy as np
 
 from gevi_cli.frontend.config import FrontendConfig
 from gevi_cli.frontend.klt import Pyramid, in_image, lk_once
-from gevi_cli.frontend.types import RectifiedStereo
+from gevi_cli.observations import RectifiedStereo
 
 STEP_PX = 40.0
 """Spacing of the disparity hypotheses (px): about the LK capture range measured above."""

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gevi_cli import estimators as est
-from gevi_cli.frontend.types import RectifiedStereo, StereoObs
+from gevi_cli.observations import RectifiedStereo, StereoObs
 
 FILL_SIGMAS = 3.0
 """A point that fills a keyframe beyond its far gate needs a disparity this many standard deviations

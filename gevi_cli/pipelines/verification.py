@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 
 from gevi_cli import estimators as est
-from gevi_cli.frontend.types import RectifiedStereo
+from gevi_cli.observations import RectifiedStereo
 from gevi_cli.pipelines.config import VerifyConfig
 
 

@@ -65,7 +65,7 @@ def _is_export(path: Path) -> bool:
 
 def open_input(req: RunRequest):
     """(source, kind) for the request: an image Sequence or a TrackExport."""
-    from gevi_cli.commands.options import sequence_kwargs
+    from gevi_cli.datasets.registry import sequence_kwargs
     from gevi_cli.datasets.strided import StridedSequence, check_stride
 
     if req.sequence is None:

@@ -29,7 +29,7 @@ from gevi_cli.frontend.grid import GridDetector, detect_grid
 from gevi_cli.frontend.derotate import apply_homography, fit_inplane
 from gevi_cli.frontend.image_frontend import STAGES, ImageFrontEnd
 from gevi_cli.frontend.klt import build_pyramid, track_lk, track_lk_scaled
-from gevi_cli.frontend.types import FeatureObs, Prediction
+from gevi_cli.observations import FeatureObs, Prediction
 from gevi_cli.frontend.rectify import Rectifier
 from gevi_cli.frontend.stereo import disparity_gate, hypotheses, match_stereo, refine_on_row
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from gevi_cli.frontend.types import RectifiedStereo, StereoObs
+from gevi_cli.observations import RectifiedStereo, StereoObs
 from gevi_cli.pipelines.keyframe import make_keyframe
 
 

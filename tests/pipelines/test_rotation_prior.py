@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from gevi_cli.geometry import exp_so3
-from gevi_cli.frontend.types import RectifiedStereo
+from gevi_cli.observations import RectifiedStereo
 from gevi_cli.pipelines.config import OdometryConfig
 from gevi_cli.pipelines.odometry import KeyframeOdometry
 from gevi_cli.pipelines.types import BRIDGED, OK, FrameResult

@@ -1,4 +1,4 @@
-"""Typed values that flow from a front end to an odometry back end.
+"""Typed values a front end (the LK front end, a recorded track export) hands an odometry back end.
 
 Pixels are in the **rectified** left/right images of the rig (see :class:`RectifiedStereo`);
 feature ids are int64 and persistent: the same physical feature keeps its id from the keyframe where

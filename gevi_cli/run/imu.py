@@ -1,4 +1,4 @@
-"""`gevi imu`'s I/O: open the sequence, build the report (:mod:`.report`), write and print it."""
+"""`gevi imu`'s run: open the sequence, build the report (evaluation.imu_report), write and print it."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -10,10 +10,10 @@ from gevi_cli.errors import GeviError
 
 def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind, groundtruth, calib, imu_calib, topics,
                    cameras, imu_stride: int = 1, echo=print) -> Path:
-    from gevi_cli.commands.options import sequence_kwargs
+    from gevi_cli.datasets.registry import sequence_kwargs
     from gevi_cli.datasets import open_sequence
     from gevi_cli.inertial.imu_stream import ImuStream
-    from gevi_cli.inertial.report import imu_report
+    from gevi_cli.evaluation.imu_report import imu_report
     from gevi_cli.run.folder import make_run_dir
 
     path = Path(sequence)
