@@ -138,11 +138,11 @@ def ideal_windows(render: Path, recs: list[dict], noise_seed: int = 0) -> None:
     """Add ``ideal``, ``ideal_kf2`` and ``ideal_frames`` windows (see the module docstring) to every
     record whose images can all be cast (records lacking a truth stamp are left without)."""
     import yaml
+    from track_bias import cast_to_scene
 
     from gevi_cli import estimators as est
     from gevi_cli.datasets import open_sequence
     from gevi_cli.simulate.generate import SimulationConfig, build_sequence
-    from track_bias import cast_to_scene
 
     meta = yaml.safe_load((render / "simulation.yaml").read_text())
     sim = build_sequence(SimulationConfig.from_description(meta))

@@ -63,8 +63,8 @@ def main():
     best_bare, best_reader = float("inf"), float("inf")
     for _ in range(args.repeat):  # interleaved, best of N: the page cache is warm for both
         t0 = time.perf_counter()
-        for l, r in zip(left, right):
-            cv2.imread(l, cv2.IMREAD_GRAYSCALE)
+        for line, r in zip(left, right):
+            cv2.imread(line, cv2.IMREAD_GRAYSCALE)
             cv2.imread(r, cv2.IMREAD_GRAYSCALE)
         best_bare = min(best_bare, time.perf_counter() - t0)
         t0 = time.perf_counter()

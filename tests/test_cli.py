@@ -4,8 +4,8 @@ from __future__ import annotations
 import subprocess
 import sys
 
-from support import run_cli
 from gevi_cli import __version__
+from support import run_cli
 
 
 def test_version_and_help(capsys):

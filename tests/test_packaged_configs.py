@@ -1,8 +1,9 @@
 """The per-kind configurations are package data: found inside the installed package, whatever the install."""
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
+
+import tomllib
 
 import gevi_cli
 from gevi_cli.run import session

@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import support
-
 from gevi_cli import shared_data
 from gevi_cli.batch.config import load_batch_config
 

@@ -10,8 +10,13 @@ from pathlib import Path
 
 from gevi_cli.datasets import bag_streams as streams
 from gevi_cli.datasets.bagfile import bag_root, describe_error, open_reader
-from gevi_cli.datasets.rosbag import (check_requested_topics, choose_gt_topic, choose_imu_topics, find_imu_noise,
-                                      parse_topics)
+from gevi_cli.datasets.rosbag import (
+    check_requested_topics,
+    choose_gt_topic,
+    choose_imu_topics,
+    find_imu_noise,
+    parse_topics,
+)
 from gevi_cli.errors import DataError, GeviError, LayoutError
 from gevi_cli.trajectory import read_trajectory
 

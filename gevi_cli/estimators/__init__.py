@@ -7,7 +7,6 @@ coordinates (n, 2); ``(R_ck, t_ck)`` maps keyframe-left coordinates into current
 rotation model is ``R_ck = L_c^T Rz(psi) L_k``; angles in radians.
 """
 
-from .errors import DegenerateInput, EstimatorError, NonFiniteInput, ShapeError, TooFewPoints
 from gevi_cli.geometry import (
     exp_so3,
     levelling,
@@ -23,8 +22,18 @@ from gevi_cli.geometry import (
     tilt_angles,
     wrap_angle,
 )
+
+from .crlb import crlb4, crlb6, fisher6
+from .errors import DegenerateInput, EstimatorError, NonFiniteInput, ShapeError, TooFewPoints
+from .minimal3pt import (
+    essential_upright,
+    ransac_3pt_upright,
+    ransac_iterations,
+    sampson_distances,
+    solve_3pt_upright,
+)
 from .noise import sigma2_onesided, sigma2_stereo, sigma2_symmetric
-from .triangulation import triangulate, triangulate_jacobian
+from .pnp4 import bias_terms, build_A, epipolar_residuals_jac, pnp4_be, pnp4_gn, pnp4_ls, row_vectors
 from .pnp6 import (
     bias_matrix_G,
     build_H,
@@ -37,15 +46,7 @@ from .pnp6 import (
     pnp_l1_filter,
     recover_pose,
 )
-from .pnp4 import bias_terms, build_A, epipolar_residuals_jac, pnp4_be, pnp4_gn, pnp4_ls, row_vectors
-from .minimal3pt import (
-    essential_upright,
-    ransac_3pt_upright,
-    ransac_iterations,
-    sampson_distances,
-    solve_3pt_upright,
-)
-from .crlb import crlb4, crlb6, fisher6
+from .triangulation import triangulate, triangulate_jacobian
 
 __all__ = [
     "EstimatorError",
@@ -99,7 +100,8 @@ __all__ = [
 ]
 
 # spec 9 (preintegration, stereo-IMU initialisation) and spec 10 (epipolar local BA)
-from .preintegration import Preintegrated, imu_segment, preintegrate, preintegrate_batch
+from .epipolar_ba import BAOptions, BAProblem, BAResult, BAWindow, ImageObs, epipolar_local_ba, poses_from_tracking
+from .fusion import FusionState, FusionWindow, bcd_refine, propagate_tilts, sigma_step  # spec 8 (BCD)
 from .initialization import (
     InitOptions,
     InitResult,
@@ -110,7 +112,7 @@ from .initialization import (
     refine_gravity,
     stereo_imu_init,
 )
-from .epipolar_ba import BAOptions, BAProblem, BAResult, BAWindow, ImageObs, epipolar_local_ba, poses_from_tracking
+from .preintegration import Preintegrated, imu_segment, preintegrate, preintegrate_batch
 
 __all__ += [
     "Preintegrated",
@@ -134,7 +136,4 @@ __all__ += [
     "poses_from_tracking",
 ]
 
-# spec 8 (BCD refinement with joint gravity-prior covariance estimation)
-from .fusion import FusionState, FusionWindow, bcd_refine, propagate_tilts, sigma_step
-
-__all__ += ["FusionWindow", "FusionState", "bcd_refine", "propagate_tilts", "sigma_step"]
+__all__ += ["FusionWindow", "FusionState", "bcd_refine", "propagate_tilts", "sigma_step"]  # spec 8

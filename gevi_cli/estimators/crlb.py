@@ -8,9 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from gevi_cli.geometry import project_jacobian, skew
+
 from ._checks import as_covs, as_matrix, as_points, need, same_length
 from .errors import DegenerateInput
-from gevi_cli.geometry import project_jacobian, skew
 from .pnp4 import epipolar_residuals_jac
 
 

@@ -40,8 +40,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import DegenerateInput, NonFiniteInput, ShapeError, TooFewPoints
 from gevi_cli.geometry import homogeneous, rot_x, rot_y, rot_z, skew
+
+from .errors import DegenerateInput, NonFiniteInput, ShapeError, TooFewPoints
 
 __all__ = [
     "ImageObs",
@@ -320,15 +321,15 @@ class BAProblem:
         L = np.empty((self.m, Gm.shape[2]))
         for g, (s, e) in enumerate(self._gslices):
             np.matmul(self.ya[s:e], Gm[g], out=L[s:e])
-        l = L[:, :3]
-        n = np.sqrt(l[:, 0] ** 2 + l[:, 1] ** 2)
-        e = np.einsum("mi,mi->m", l, self.xb)
+        lin = L[:, :3]
+        n = np.sqrt(lin[:, 0] ** 2 + lin[:, 1] ** 2)
+        e = np.einsum("mi,mi->m", lin, self.xb)
         d = e / n
         if not jac:
             return d, None
-        # dd/dp = dl/dp . dd/dl with dd/dl = x_b/n - (l.x_b)(l1, l2, 0)/n^3 (spec 6.3)
+        # dd/dp = dl/dp . dd/dl with dd/dl = x_b/n - (l.x_b)(l1, l2, 0)/n^3, l = lin (spec 6.3)
         g = self.xb / n[:, None]
-        g[:, :2] -= (e / n**3)[:, None] * l[:, :2]
+        g[:, :2] -= (e / n**3)[:, None] * lin[:, :2]
         return d, np.einsum("mkj,mj->mk", L[:, 3:].reshape(self.m, 12, 3), g)
 
     def residuals(self, x):

@@ -30,8 +30,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._checks import as_covs, as_matrix, as_points, finite_scalar, need, same_length
-from .errors import DegenerateInput, ShapeError
 from gevi_cli.geometry import (
     drot_z,
     exp_so3,
@@ -43,6 +41,9 @@ from gevi_cli.geometry import (
     tilt_angles,
     wrap_angle,
 )
+
+from ._checks import as_covs, as_matrix, as_points, finite_scalar, need, same_length
+from .errors import DegenerateInput, ShapeError
 
 
 def sigma_step(residuals, lo, hi, prior_scatter=None, prior_dof: float = 0.0) -> np.ndarray:
@@ -459,10 +460,10 @@ class _Problem:
         AT = np.swapaxes(A, 1, 2)
         Dg = self._Dconst.copy()
         Dg[:-1] += AT @ A
-        O = AT * Wg[:, :, None]
+        Off = AT * Wg[:, :, None]
         Hf[self.idx_diag] += Dg.ravel()
-        Hf[self.idx_up] += O.ravel()  # (+=: with K = 2 the visual tilt_1 / tilt_K block is this one)
-        Hf[self.idx_lo] += np.swapaxes(O, 1, 2).ravel()
+        Hf[self.idx_up] += Off.ravel()  # (+=: with K = 2 the visual tilt_1 / tilt_K block is this one)
+        Hf[self.idx_lo] += np.swapaxes(Off, 1, 2).ravel()
         gt = np.zeros((K, 2))
         gt[:-1] = np.einsum("kji,kj->ki", A, rc)
         gt[1:] += Wg * rc

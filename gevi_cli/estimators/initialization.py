@@ -29,8 +29,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import DegenerateInput, NonFiniteInput, ShapeError, TooFewPoints
 from gevi_cli.geometry import exp_so3, log_so3
+
+from .errors import DegenerateInput, NonFiniteInput, ShapeError, TooFewPoints
 from .preintegration import Preintegrated, imu_segment, preintegrate_batch
 
 __all__ = [

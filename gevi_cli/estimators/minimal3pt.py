@@ -13,9 +13,10 @@ import math
 
 import numpy as np
 
+from gevi_cli.geometry import homogeneous, rot_z, skew
+
 from ._checks import as_matrix, as_points, finite_scalar, need, same_length
 from .errors import DegenerateInput, ShapeError
-from gevi_cli.geometry import homogeneous, rot_z, skew
 
 _ANG5 = 2.0 * np.pi * np.arange(5) / 5.0
 _RZ5 = rot_z(_ANG5)  # (5, 3, 3)

@@ -9,9 +9,10 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
+from gevi_cli.geometry import homogeneous, skew
+
 from ._checks import as_points, need, same_length, stereo_inputs
 from .errors import DegenerateInput
-from gevi_cli.geometry import homogeneous, skew
 
 _D = np.diag([1.0, 1.0, 0.0])
 

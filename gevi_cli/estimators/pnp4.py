@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from gevi_cli.geometry import drot_z, homogeneous, rot_z, skew, wrap_angle
+
 from ._checks import (
     as_covs,
     as_matrix,
@@ -21,7 +23,6 @@ from ._checks import (
     solve_checked,
 )
 from .errors import DegenerateInput
-from gevi_cli.geometry import drot_z, homogeneous, rot_z, skew, wrap_angle
 
 MIN_POINTS = 3
 _M1 = np.diag([1.0, 1.0, 0.0])
@@ -239,19 +240,19 @@ def _epipolar(psi, t, z, y, q, L_k, L_c, R_rl, t_rl, jac=True):
         M = np.concatenate([blocks[0][None], blocks[1][None], blocks[2],
                             blocks[3][None], blocks[4][None], blocks[5]])  # (10, 3, 3)
         D = (qh @ M.transpose(1, 0, 2).reshape(3, 30)).reshape(n, 2, 5, 3)
-        l = D[:, :, 0, :]
+        lines = D[:, :, 0, :]
     else:
         M = np.concatenate([blocks[0][None], blocks[1][None]])  # (2, 3, 3)
-        l = (qh @ M.transpose(1, 0, 2).reshape(3, 6)).reshape(n, 2, 3)
+        lines = (qh @ M.transpose(1, 0, 2).reshape(3, 6)).reshape(n, 2, 3)
     xh = np.empty((n, 2, 3))
     xh[:, 0, :2] = z
     xh[:, 1, :2] = y
     xh[:, :, 2] = 1.0
-    l0, l1 = l[:, :, 0], l[:, :, 1]
+    l0, l1 = lines[:, :, 0], lines[:, :, 1]
     nrm = np.sqrt(l0 * l0 + l1 * l1)
     if np.any(nrm <= 1e-300):
         raise DegenerateInput("epipolar: degenerate epipolar line (zero translation?)")
-    num = l0 * xh[:, :, 0] + l1 * xh[:, :, 1] + l[:, :, 2]
+    num = l0 * xh[:, :, 0] + l1 * xh[:, :, 1] + lines[:, :, 2]
     d = num / nrm
     if not jac:
         return d, None

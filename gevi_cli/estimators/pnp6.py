@@ -13,9 +13,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from gevi_cli.geometry import exp_so3, project, project_jacobian, project_to_so3
+
 from ._checks import as_covs, as_matrix, as_points, need, same_length, solve_checked
 from .errors import DegenerateInput, NonFiniteInput, ShapeError
-from gevi_cli.geometry import exp_so3, project, project_jacobian, project_to_so3
 
 MIN_POINTS = 6  # 11 unknowns, two rows per point
 
@@ -237,8 +238,8 @@ def pnp6_l1(p, q):
     H, d, pbar = build_H(p, q)
     m = H.shape[0]
     Hs = csr_matrix(H)
-    I = identity(m, format="csr")
-    A_ub = bmat([[Hs, -I], [-Hs, -I]], format="csr")
+    eye = identity(m, format="csr")
+    A_ub = bmat([[Hs, -eye], [-Hs, -eye]], format="csr")
     b_ub = np.concatenate([d, -d])
     c = np.concatenate([np.zeros(11), np.ones(m)])
     bounds = [(None, None)] * 11 + [(0, None)] * m

@@ -35,8 +35,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import DegenerateInput, NonFiniteInput, ShapeError
 from gevi_cli.geometry import exp_so3, skew
+
+from .errors import DegenerateInput, NonFiniteInput, ShapeError
 
 __all__ = [
     "Increments",

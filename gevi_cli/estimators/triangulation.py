@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from gevi_cli.geometry import homogeneous, skew
+
 from ._checks import (
     finite_scalar,
     stereo_inputs,
 )
 from .errors import DegenerateInput
-from gevi_cli.geometry import homogeneous, skew
 
 _EYE_SKEW = skew(np.eye(3))  # [e_j]_x for j = 0..2, shape (3, 3, 3)
 

@@ -60,7 +60,7 @@ from evo.core.metrics import APE, RPE, PoseRelation, Unit  # noqa: E402
 from evo.core.trajectory import PosePath3D, PoseTrajectory3D  # noqa: E402
 
 __all__ = [
-    "APE", "RPE", "PoseRelation", "Unit", "PosePath3D", "PoseTrajectory3D", "file_interface",
+    "APE", "RPE", "PoseRelation", "Unit", "PosePath3D", "PoseTrajectory3D", "file_interface",  # noqa: F822 (lazy)
     "filters", "geometry", "lie_algebra", "metrics", "sync", "to_evo", "EVO_VERSION",
 ]
 

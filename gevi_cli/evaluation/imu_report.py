@@ -17,12 +17,23 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from gevi_cli import estimators as est
-from gevi_cli.inertial.attitude import (AttitudeFilterConfig, GravityAttitudeFilter, complementary_bank, gyro_only,
-                                        level_rotations, run_filter)
+from gevi_cli.inertial.attitude import (
+    AttitudeFilterConfig,
+    GravityAttitudeFilter,
+    complementary_bank,
+    gyro_only,
+    level_rotations,
+    run_filter,
+)
 from gevi_cli.inertial.imu_stream import ImuNoise, ImuStream
+from gevi_cli.inertial.standstill import (
+    GRAVITY,
+    StandstillEstimate,
+    imu_at_rest,
+    standstill_estimate,
+    tilt_from_specific_force,
+)
 from gevi_cli.inertial.velocity_aided import VelocityAidedConfig, VelocityAidedFilter
-from gevi_cli.inertial.standstill import (GRAVITY, StandstillEstimate, imu_at_rest, standstill_estimate,
-                                          tilt_from_specific_force)
 
 #: standstill detection on the IMU alone (no images here): windows of this length (s) ...
 STILL_WINDOW_S = 0.5

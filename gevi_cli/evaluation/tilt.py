@@ -73,7 +73,6 @@ def gravity_angle_deg(R_est: np.ndarray, R_ref: np.ndarray) -> np.ndarray:
 def tilt_errors(est: Trajectory, gt: Trajectory, max_diff_s: float = 0.01) -> TiltErrors:
     """Tilt error of every estimated pose with a ground-truth pose within ``max_diff_s``."""
     from gevi_cli.evaluation.associate import associate
-
     from gevi_cli.geometry import tilt_angles, wrap_angle
 
     a = associate(gt, est, max_diff_s=max_diff_s)

@@ -22,16 +22,16 @@ import time
 import numpy as np
 
 from gevi_cli.datasets.calibration import StereoRig
-from gevi_cli.frontend.config import FrontendConfig
-from gevi_cli.geometry import log_so3
 from gevi_cli.frontend import reacquire
 from gevi_cli.frontend.affine import PatchTemplates
+from gevi_cli.frontend.config import FrontendConfig
 from gevi_cli.frontend.derotate import apply_homography, derotate, fit_inplane, rotation_homography
 from gevi_cli.frontend.grid import GridDetector
 from gevi_cli.frontend.klt import Pyramid, build_pyramid, in_image, track_lk, track_lk_scaled
 from gevi_cli.frontend.rectify import Rectifier
 from gevi_cli.frontend.shading import remove_shading
 from gevi_cli.frontend.stereo import match_stereo
+from gevi_cli.geometry import log_so3
 from gevi_cli.observations import FeatureObs, Prediction, RectifiedStereo, StereoObs
 
 STAGES = ("rectify", "pyramid", "derotate", "lk", "affine", "detect", "stereo", "reacquire")

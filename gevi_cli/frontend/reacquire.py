@@ -23,7 +23,6 @@ import numpy as np
 from gevi_cli.frontend.config import FrontendConfig
 from gevi_cli.observations import Prediction
 
-
 _PATCH = 31.0  # ORB's patch size (px at level 0): the keypoint size of a level-0 descriptor
 
 

@@ -26,8 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from gevi_cli import estimators as est
-from gevi_cli.geometry import right_jacobian
 from gevi_cli.estimators.initialization import GRAVITY
+from gevi_cli.geometry import right_jacobian
 from gevi_cli.inertial.imu_stream import ImuNoise
 
 E3 = np.array([0.0, 0.0, 1.0])

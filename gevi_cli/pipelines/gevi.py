@@ -36,23 +36,35 @@ import cv2
 import numpy as np
 
 from gevi_cli import estimators as est
-from gevi_cli.frontend import FrontEnd
 from gevi_cli.estimators.preintegration import imu_segment, integrate_increments
+from gevi_cli.frontend import FrontEnd
 from gevi_cli.geometry import make_T
 from gevi_cli.inertial.imu_stream import ImuStream
 from gevi_cli.inertial.standstill import GRAVITY
-from gevi_cli.pipelines.config import OdometryConfig
-from gevi_cli.pipelines.inertial_init import (GEVI, INIT, STANDSTILL, VISUAL, FrameSample, InertialInitialisation,
-                                              tilt_of, yaw_of)
-from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches
-from gevi_cli.pipelines.recent_motion import RecentMotion
 from gevi_cli.pipelines.acc_bias import AccBiasTracker
-from gevi_cli.pipelines.window_gravity import WindowGravity
-from gevi_cli.pipelines.pose6 import (converged_limit_px, opencv_pnp, pnp_ransac_inliers, reprojection_median_px,
-                                      tracked_pose6)
+from gevi_cli.pipelines.config import OdometryConfig
+from gevi_cli.pipelines.inertial_init import (
+    GEVI,
+    INIT,
+    STANDSTILL,
+    VISUAL,
+    FrameSample,
+    InertialInitialisation,
+    tilt_of,
+    yaw_of,
+)
+from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches
+from gevi_cli.pipelines.pose6 import (
+    converged_limit_px,
+    opencv_pnp,
+    pnp_ransac_inliers,
+    reprojection_median_px,
+    tracked_pose6,
+)
+from gevi_cli.pipelines.recent_motion import RecentMotion
 from gevi_cli.pipelines.types import INERTIAL, OK
 from gevi_cli.pipelines.verification import FivePointL1Verification, ThreePointVerification, TrackingFailure
-
+from gevi_cli.pipelines.window_gravity import WindowGravity
 
 #: at most this many BCDs per frame for the chi-square gate (_gated_bcd)
 GATE_BCDS = 3

@@ -24,8 +24,8 @@ from gevi_cli.frontend import FrontEnd, Prediction
 from gevi_cli.geometry import invert_pose, make_T, orthonormal_pose
 from gevi_cli.pipelines.config import OdometryConfig
 from gevi_cli.pipelines.keyframe import Keyframe, make_keyframe
-from gevi_cli.pipelines.types import BRIDGED, OK, FrameResult
 from gevi_cli.pipelines.pose6 import reprojection_median_px
+from gevi_cli.pipelines.types import BRIDGED, OK, FrameResult
 from gevi_cli.pipelines.verification import TrackingFailure
 
 

@@ -10,10 +10,10 @@ from gevi_cli.errors import GeviError
 
 def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind, groundtruth, calib, imu_calib, topics,
                    cameras, imu_stride: int = 1, echo=print) -> Path:
-    from gevi_cli.datasets.registry import sequence_kwargs
     from gevi_cli.datasets import open_sequence
-    from gevi_cli.inertial.imu_stream import ImuStream
+    from gevi_cli.datasets.registry import sequence_kwargs
     from gevi_cli.evaluation.imu_report import imu_report
+    from gevi_cli.inertial.imu_stream import ImuStream
     from gevi_cli.run.folder import make_run_dir
 
     path = Path(sequence)

@@ -253,8 +253,8 @@ def execute(req: RunRequest, echo=print) -> int:
 
     from gevi_cli import __version__
     from gevi_cli.run.driver import run_odometry
-    from gevi_cli.run.sinks import FolderSink
     from gevi_cli.run.folder import PRIMARY, PRIMARY_KITTI, RunStatus, make_run_dir
+    from gevi_cli.run.sinks import FolderSink
 
     t_start = time.perf_counter()
     cv2.setNumThreads(1)

@@ -11,8 +11,8 @@ import numpy as np
 
 from gevi_cli.estimators import crlb as _crlb
 from gevi_cli.estimators import pnp4, pnp6
-from gevi_cli.geometry import rotation_error, rtilt, tilt_angles, wrap_angle
 from gevi_cli.estimators.triangulation import triangulate
+from gevi_cli.geometry import rotation_error, rtilt, tilt_angles, wrap_angle
 from gevi_cli.studies import simulation as sim
 
 

@@ -9,9 +9,9 @@ import time
 import numpy as np
 
 from gevi_cli.estimators import pnp4
-from gevi_cli.geometry import wrap_angle
 from gevi_cli.estimators.minimal3pt import ransac_3pt_upright
 from gevi_cli.estimators.triangulation import triangulate
+from gevi_cli.geometry import wrap_angle
 from gevi_cli.studies import simulation as sim
 from gevi_cli.studies.montecarlo import perturb_levelling
 

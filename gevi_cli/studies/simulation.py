@@ -252,11 +252,11 @@ def run_fusion(traj: FusionTrajectory, rng, n=200, window=0.2, R_ic=None, modes=
     accelerometer direction, see docs/estimators_notes.md).
     """
     from gevi_cli.estimators.fusion import FusionWindow, bcd_refine, propagate_tilts
-    from gevi_cli.geometry import levelling
-    from gevi_cli.geometry import tilt_angles as _tilt
     from gevi_cli.estimators.pnp4 import pnp4_be, pnp4_gn
     from gevi_cli.estimators.pnp6 import pnp6_be, pnp6_refine
     from gevi_cli.estimators.triangulation import triangulate
+    from gevi_cli.geometry import levelling
+    from gevi_cli.geometry import tilt_angles as _tilt
 
     R_ic = R_IC_FORWARD if R_ic is None else np.asarray(R_ic, float)
     lo = (traj.sigma_a / GRAVITY) ** 2 if lo is None else lo

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 from helpers import markers, trajectory_bytes, tree
+
 from support import run_cli
 
 # every test here uses the session's small batch (about 25 s to make) and runs batches of its own

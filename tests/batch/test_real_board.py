@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
+
 from support import REPO, SHARED_DATA, shared_path
 
 REAL = REPO / "configs" / "batch" / "real.yaml"

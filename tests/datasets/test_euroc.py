@@ -6,11 +6,11 @@ import shutil
 import cv2
 import numpy as np
 import pytest
-from support import run_cli
 
 from gevi_cli.datasets import open_sequence
 from gevi_cli.errors import DataError, GeviError
 from gevi_cli.trajectory import Trajectory, write_trajectory
+from support import run_cli
 
 
 def test_euroc_micro_contents(euroc_micro):

@@ -16,7 +16,6 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
 from test_rosbag import BagBuilder, _tiny_camchain
 
 from gevi_cli.datasets import open_sequence

@@ -4,10 +4,10 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from support import run_cli, shared_path
 
 from gevi_cli.datasets import open_sequence
 from gevi_cli.trajectory import read_trajectory
+from support import run_cli, shared_path
 
 # KITTI 04-10 rectified calibration as the CurrentFeature authors' runner uses it (cfo_kitti04/SOURCE.md)
 F, CX, CY, B_GRAY = 707.0912, 601.8873, 183.1104, 0.537150653267924

@@ -13,13 +13,13 @@ import cv2
 import numpy as np
 import pytest
 import yaml
-from support import run_cli, shared_path
 
 from gevi_cli.datasets import open_sequence
 from gevi_cli.datasets.kalibr import read_camchain, write_camchain
 from gevi_cli.errors import GeviError
 from gevi_cli.geometry import invert_pose
 from gevi_cli.trajectory import read_trajectory
+from support import run_cli, shared_path
 
 N_PAIRS = 20
 FIRST = 30  # first of the EuRoC-micro pairs put in the bags

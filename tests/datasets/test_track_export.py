@@ -3,12 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from support import shared_path
 
 from gevi_cli.datasets import track_export
 from gevi_cli.datasets.track_export import TrackExport, open_track_export
 from gevi_cli.errors import DataError, GeviError, LayoutError
 from gevi_cli.frontend.export import ExportFrontEnd
+from support import shared_path
 
 B_GRAY, B_COLOUR, F = 0.537150653267924, 0.5433, 707.0912
 

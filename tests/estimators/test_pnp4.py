@@ -12,8 +12,8 @@ from gevi_cli.estimators import (
     pnp4_ls,
     triangulate,
 )
-from gevi_cli.geometry import wrap_angle
 from gevi_cli.estimators.pnp4 import pnp4_be_cov
+from gevi_cli.geometry import wrap_angle
 from gevi_cli.studies import montecarlo as mc
 from gevi_cli.studies import simulation as sim
 

@@ -23,8 +23,8 @@ from gevi_cli.estimators import (
     pnp6_l1,
     triangulate,
 )
-from gevi_cli.geometry import project
 from gevi_cli.estimators.pnp6 import l1_regression, pnp6_l1_irls, pnp_l1_filter
+from gevi_cli.geometry import project
 from gevi_cli.studies import simulation as sim
 
 POSE_TOL = 1e-7

@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from gevi_cli.estimators import DegenerateInput, NonFiniteInput
-from gevi_cli.geometry import exp_so3, log_so3
 from gevi_cli.estimators.preintegration import (
     imu_segment,
     integrate_increments,
@@ -15,6 +14,7 @@ from gevi_cli.estimators.preintegration import (
     preintegrate_batch,
     preintegrate_reference,
 )
+from gevi_cli.geometry import exp_so3, log_so3
 from gevi_cli.studies.simulation import G_W, SinTraj
 
 

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
-from support import SHARED_DATA
 
 from gevi_cli.trajectory import Trajectory
+from support import SHARED_DATA
 
 DATA = SHARED_DATA  # $GEVI_SHARED_DATA, else ../shared/data next to the repo (support.py)
 TRAJ = DATA / "trajectories"

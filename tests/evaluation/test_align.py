@@ -1,13 +1,12 @@
 """Alignment: posyaw recovers a known yaw + translation exactly; se3/sim3 via evo; ordering of ATEs."""
 import numpy as np
 import pytest
+from eval_support import synthetic, transformed
 from scipy.spatial.transform import Rotation
 
 from gevi_cli.errors import GeviError
 from gevi_cli.evaluation.align import align, estimate_alignment
 from gevi_cli.evaluation.ate import compute_ate
-
-from eval_support import synthetic, transformed
 
 
 def rot_z(a):

@@ -1,14 +1,13 @@
 """Association (tolerance, offset, coverage) and RPE deltas in frames, metres and seconds."""
 import numpy as np
 import pytest
+from eval_support import synthetic
 
 from gevi_cli.errors import GeviError
 from gevi_cli.evaluation.associate import associate
 from gevi_cli.evaluation.evaluate import EvalSettings, evaluate_pair
 from gevi_cli.evaluation.rpe import compute_rpe
 from gevi_cli.trajectory import Trajectory
-
-from eval_support import synthetic
 
 
 def test_time_offset_and_tolerance():

@@ -8,7 +8,6 @@ ground truth as they are (the paper's protocol).
 import json
 
 import pytest
-
 from eval_support import DATA, run_cli
 
 PAPER_OV2 = {"ov2_gray": (1.306, 0.0239), "ov2_color": (3.453, 0.0487)}

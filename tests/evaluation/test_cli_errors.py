@@ -2,15 +2,14 @@
 import json
 
 import numpy as np
+from eval_support import run_cli, synthetic, write_tum
 
 from gevi_cli.trajectory import Trajectory
-
-from eval_support import run_cli, synthetic, write_tum
 
 
 def _one_error_line(p):
     assert p.returncode == 2, (p.stdout, p.stderr)
-    lines = [l for l in p.stderr.splitlines() if l.strip()]
+    lines = [line for line in p.stderr.splitlines() if line.strip()]
     assert len(lines) == 1, p.stderr
     assert "Traceback" not in p.stderr
     assert lines[0].startswith("gevi: error: ")
@@ -83,9 +82,9 @@ def test_failed_cells_missing_empty_and_low_coverage(tmp_path):
     assert status[("empty", "seqA")] == ("failed", "no valid poses")
     assert status[("short", "seqB")] == ("failed", "missing")
     md = (tmp_path / "o/tables/ate_trans_rmse.md").read_text()
-    row_a = next(l for l in md.splitlines() if l.startswith("| seqA"))
+    row_a = next(line for line in md.splitlines() if line.startswith("| seqA"))
     assert row_a.count("failed") == 2
-    avg = next(l for l in md.splitlines() if l.startswith("| average"))
+    avg = next(line for line in md.splitlines() if line.startswith("| average"))
     assert "n/a" in avg  # short/empty failed on a sequence: no average
     # a lower threshold accepts the short run
     p = run_cli(["--results", root, "--gt-root", gtd, "--no-plots", "--min-coverage", "70", "-o", tmp_path / "o2"], tmp_path)
@@ -123,9 +122,8 @@ def test_frame_conversion_and_mixup_warning(tmp_path):
 def test_T_B_C0_from_an_euroc_sensor_yaml_and_yaml_errors_in_one_line(tmp_path):
     """`--T-B-C0 mav0/cam0/sensor.yaml` takes the file the EuRoC reader takes (its %YAML:1.0 header);
     a broken YAML anywhere is one line with file and line."""
-    from support import shared_path
-
     from gevi_cli.datasets.yamlio import load_yaml, matrix
+    from support import shared_path
 
     sensor = shared_path("euroc_micro", "mav0", "cam0", "sensor.yaml")
     assert sensor.read_text().startswith("%YAML:1.0")

@@ -3,7 +3,6 @@ import json
 import shutil
 
 import pytest
-
 from eval_support import DATA, run_cli
 
 

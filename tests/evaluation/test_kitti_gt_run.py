@@ -12,6 +12,7 @@ import shutil
 
 import pytest
 import yaml
+
 from support import run_cli, shared_path
 
 

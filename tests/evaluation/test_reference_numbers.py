@@ -3,15 +3,14 @@ import json
 
 import numpy as np
 import pytest
+from eval_support import run_cli
 
 from gevi_cli.evaluation.align import align
-from gevi_cli.evaluation.ate import compute_ate
 from gevi_cli.evaluation.associate import associate
+from gevi_cli.evaluation.ate import compute_ate
 from gevi_cli.evaluation.evaluate import EvalSettings, evaluate_pair
 from gevi_cli.evaluation.rpe import compute_rpe
 from gevi_cli.trajectory import read_trajectory
-
-from eval_support import run_cli
 
 RPG = "rpg_trajectory_evaluation/results/euroc_vislam_mono/laptop/vislam_rp"
 

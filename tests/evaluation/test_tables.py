@@ -15,7 +15,7 @@ def _table(trials=False):
 
 
 def _row(md, label):
-    return [c.strip() for c in next(l for l in md.splitlines() if l.startswith(f"| {label} ")).strip("|").split("|")]
+    return [c.strip() for c in next(line for line in md.splitlines() if line.startswith(f"| {label} ")).strip("|").split("|")]
 
 
 def test_markdown_marks_best_and_second_and_failed():

@@ -6,11 +6,11 @@ import json
 
 import numpy as np
 import pytest
-from support import run_cli, shared_path
 
 from gevi_cli.evaluation.plots import view_of, world_of
 from gevi_cli.run.folder import RunStatus, run_world, write_trajectory_png
 from gevi_cli.trajectory import Trajectory, read_trajectory, write_trajectory
+from support import run_cli, shared_path
 
 
 def _car_in_kitti_camera_frame(n=51) -> np.ndarray:

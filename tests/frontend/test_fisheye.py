@@ -11,12 +11,12 @@ from dataclasses import replace
 import cv2
 import numpy as np
 import pytest
-from support import shared_path
 
 from gevi_cli.datasets import open_sequence
 from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
 from gevi_cli.frontend.rectify import Rectifier
 from gevi_cli.geometry import invert_pose
+from support import shared_path
 
 
 def _rig() -> StereoRig:

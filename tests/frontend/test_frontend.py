@@ -19,19 +19,18 @@ import cv2
 import numpy as np
 import pytest
 
-from support import shared_path
-
 from gevi_cli.datasets import open_sequence
 from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
-from gevi_cli.geometry import exp_so3
 from gevi_cli.frontend.config import FrontendConfig
-from gevi_cli.frontend.grid import GridDetector, detect_grid
 from gevi_cli.frontend.derotate import apply_homography, fit_inplane
+from gevi_cli.frontend.grid import GridDetector, detect_grid
 from gevi_cli.frontend.image_frontend import STAGES, ImageFrontEnd
 from gevi_cli.frontend.klt import build_pyramid, track_lk, track_lk_scaled
-from gevi_cli.observations import FeatureObs, Prediction
 from gevi_cli.frontend.rectify import Rectifier
 from gevi_cli.frontend.stereo import disparity_gate, hypotheses, match_stereo, refine_on_row
+from gevi_cli.geometry import exp_so3
+from gevi_cli.observations import FeatureObs, Prediction
+from support import shared_path
 
 CFG = FrontendConfig()
 FINE = replace(CFG, cell_px=16)
@@ -145,7 +144,8 @@ def test_predicted_lk_keeps_a_motion_plain_lk_loses():
     plain, ok_plain = track_lk(pa, pb, uv, CFG)
     guess = truth + np.random.default_rng(0).normal(0.0, 2.0, truth.shape)
     pred, ok_pred = track_lk(pa, pb, uv, CFG, guess)
-    good = lambda u, ok: ok & visible & (np.linalg.norm(u - truth, axis=1) < 0.1)
+    def good(u, ok):
+        return ok & visible & (np.linalg.norm(u - truth, axis=1) < 0.1)
     assert good(plain, ok_plain).sum() <= 0.1 * visible.sum()
     assert good(pred, ok_pred).sum() >= 0.9 * visible.sum()
 

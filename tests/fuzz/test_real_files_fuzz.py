@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from support import shared_path
 
 from gevi_cli.datasets.euroc import read_image_list, read_imu
 from gevi_cli.datasets.kitti import read_calib, read_times
 from gevi_cli.errors import DataError
 from gevi_cli.trajectory import Trajectory, read_trajectory, write_trajectory
 from gevi_cli.trajectory.formats import format_header, format_rows
+from support import shared_path
 
 
 def _real_trajectory_files():

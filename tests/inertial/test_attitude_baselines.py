@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from gevi_cli import estimators as est
+from gevi_cli.evaluation.imu_report import COMPLEMENTARY_TAUS_S, best_on_grid, imu_report, noise_model, step_125
 from gevi_cli.inertial.attitude import complementary, complementary_bank, gyro_only, level_rotations
 from gevi_cli.inertial.imu_stream import DEFAULT_NOISE, ImuStream
-from gevi_cli.evaluation.imu_report import COMPLEMENTARY_TAUS_S, best_on_grid, imu_report, noise_model, step_125
 
 
 def test_step_125_walks_the_series_both_ways():

@@ -25,9 +25,10 @@ def test_standstill_gyro_bias_and_gravity(euroc, window_s):
     """Averaged over the first seconds at rest: gyro bias within 2e-3 rad/s per axis of the ground
     truth's, gravity within 0.65 deg of its tilt (the unknown accelerometer bias alone accounts for
     0.56-0.58 deg there)."""
+    from scipy.spatial.transform import Rotation
+
     from gevi_cli.geometry import rot_x  # noqa: F401  (import check of the estimator package)
     from gevi_cli.inertial.standstill import standstill_estimate
-    from scipy.spatial.transform import Rotation
 
     stream, gt = euroc
     m = stream.t_ns < stream.t_ns[0] + int(window_s * 1e9)

@@ -106,8 +106,8 @@ def test_written_trajectory_has_no_attitude_step_at_keyframes(tmp_path, capsys):
     (as one step at the keyframe it was 11-24x larger on pool-easy renders; docs/method.md 9b).  A
     20 Hz full-size render, so that keyframes are several frames apart."""
     from gevi_cli.datasets import open_sequence
-    from gevi_cli.evaluation.associate import associate
     from gevi_cli.estimators import log_so3
+    from gevi_cli.evaluation.associate import associate
     from gevi_cli.simulate.generate import SimulationConfig, simulate
     from gevi_cli.trajectory import read_trajectory
 

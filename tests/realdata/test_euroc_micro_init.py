@@ -16,11 +16,10 @@ Bounds, derived:
 """
 import numpy as np
 
-from support import shared_path
-
 from gevi_cli import estimators as est
 from gevi_cli.datasets import open_sequence
 from gevi_cli.geometry import invert_pose
+from support import shared_path
 
 
 def test_init_on_real_imu_at_rest():

@@ -17,10 +17,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from support import shared_path
-
 from gevi_cli import estimators as est
 from gevi_cli.estimators.pnp6 import pnp_l1_filter
+from support import shared_path
 
 FX, CX, CY = 707.0912, 601.8873, 183.1104  # SOURCE.md (rectified, fx = fy)
 BASELINE = {"gray": 0.537150653267924, "color": 0.5433}

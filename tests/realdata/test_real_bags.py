@@ -12,11 +12,10 @@ import shutil
 import numpy as np
 import pytest
 
-from support import SHARED_DATA, run_cli, shared_path
-
 from gevi_cli.datasets import open_sequence
 from gevi_cli.datasets.bag_imu import BagImu
 from gevi_cli.errors import GeviError
+from support import SHARED_DATA, run_cli, shared_path
 
 BAGS = {
     "kapture_t265_stereo_imu": "trimmed_locoffice.bag",

@@ -6,11 +6,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from support import run_cli
 
 from gevi_cli.datasets import open_sequence
 from gevi_cli.geometry import invert_pose
 from gevi_cli.simulate.generate import SimulationConfig, build_sequence, simulate
+from support import run_cli
 
 TINY = {
     # preset: (duration s, rate Hz, resolution, expected reader kind)

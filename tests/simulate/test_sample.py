@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from support import run_cli
 
 from gevi_cli.simulate import sample as sample_mod
 from gevi_cli.simulate.generate import SimulationConfig
+from support import run_cli
 
 TINY = SimulationConfig("pool-easy", seed=0, duration_s=1.5, rate_hz=4.0, resolution=(96, 54))
 

@@ -1,14 +1,13 @@
 """Trajectory formats: reading every real file by auto-detection, exact round trips, validation."""
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
-from support import run_cli, shared_path
 from gevi_cli.errors import DataError
 from gevi_cli.trajectory import Trajectory, detect_format, read_trajectory, write_trajectory
 from gevi_cli.trajectory.stamps import decimal_strings_to_ns
+from support import run_cli, shared_path
 
 
 def _real_trajectory_files():

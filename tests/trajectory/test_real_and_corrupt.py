@@ -11,11 +11,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from support import shared_path
 
 from gevi_cli.errors import DataError
 from gevi_cli.trajectory import Trajectory, read_trajectory, write_trajectory
 from gevi_cli.trajectory.validate import position_problem
+from support import shared_path
 
 #: ORB-SLAM3-style epoch stamps in ns (> 1e17, so a TUM reader takes them as ns)
 EPOCH_NS = 1_317_000_000_000_000_000
