@@ -1,4 +1,4 @@
-"""RANSAC seeding per frame: frame k's draws depend on (--seed, k) only (README, Determinism)."""
+"""RANSAC seeding per frame: frame k's draws depend on (--seed, k) only (docs/cli.md, Determinism)."""
 from __future__ import annotations
 
 from types import SimpleNamespace
