@@ -42,33 +42,22 @@ class FrontendConfig:
 
     derotate: bool = True
     """Remove the back end's predicted frame-to-frame rotation from the current image before LK
-    (:mod:`~gevi_cli.frontend.derotate`): LK fits a translation, and rotating content biases it
-    (~0.1 px per degree with a 21 px window), an error that adds up frame after frame."""
+    (:mod:`~gevi_cli.frontend.derotate`): LK fits a translation, and rotating content biases it."""
 
     derotate_min_deg: float = 0.3
-    """Smallest predicted rotation (degrees) worth the image warp.  The warp resamples the image
-    (bilinear), which moved euroc_micro's tracks by 0.026-0.033 px RMS for any prior of 0.05-0.1 deg
-    at rest, while a rotation biases LK by ~0.1 px per degree (pool floor, 21 px window): they break
-    even near 0.3 deg.  It also keeps gyro vibration (euroc_micro at rest: 0.06-0.11 deg per frame)
-    from warping the images of a camera that does not turn."""
+    """Smallest predicted rotation (degrees) worth the image warp: below it the warp's resampling moves
+    the tracks more than the rotation would bias them, and gyro vibration at rest does not warp."""
 
     derotate_prior: str = "pose"
-    """Where the rotation to remove comes from: "pose", the back end's (GeVI: the gyro's; CFO: the
-    odometry's last step, its full 3-D rotation, only after a step whose pose kept at least half its
-    matches, else as "image"), or "image", the front end's fit of the last step's tracks with a
-    rotation in the image plane plus a shift, for both methods.  "image" is decoupled from the pose
-    and sees only the rotation about the optical axis: better for a downward camera over a floor
-    (gevi_cli/configs/pool.yaml), wrong for a forward camera, where a turn's parallax reads as a spurious
-    in-plane rotation (method.md 12.1)."""
+    """Where the rotation to remove comes from: "pose", the back end's (GeVI: the gyro's; CFO: the last
+    step's, when at least half its matches passed the verification, else as "image"), or "image", a fit
+    of the last step's tracks with an in-plane rotation plus a shift (for a downward camera over a
+    floor, gevi_cli/configs/pool.yaml; wrong for a forward camera, where a turn's parallax reads as rotation)."""
 
     affine: bool = False
-    """Re-align every frame's tracks to their patch in the keyframe's image with an affine warp, where
+    """Re-align every frame's tracks to their patch in the keyframe's image with an affine warp where
     their neighbourhood stretched or sheared since the keyframe (:mod:`~gevi_cli.frontend.affine`).
-    LK's translation-only window is biased by the perspective change of slanted planes, frame after
-    frame, and the epipolar BA turns those track errors into rotation (docs/method.md 10, 12.1).
-    Opt-in: it cut the euroc-like renders' ATE 3.5-4.4x, but on the real kitti06_head frames its ATE
-    rose 9 % (RPE -6 %), GeVI's pool-hard renders lost 7 %, and it costs ~4 ms per frame at KITTI
-    size, the kitti-like pipeline at 2.0-2.07x the LK floor against the 2x target (method.md 12.1)."""
+    Opt-in: it helps renders of slanted planes, not the real KITTI frames, and costs ~4 ms per KITTI frame."""
 
     predict: bool = True
     """Start each feature's LK where the back end's motion prediction puts its keyframe point (constant

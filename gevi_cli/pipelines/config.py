@@ -30,7 +30,8 @@ class VerifyConfig:
     ransac_prob: float = opt(0.999, "RANSAC confidence")
     min_parallax_px: float = opt(0.5, "below this median KF->current displacement the essential matrix "
                                       "is undefined (no translation): the 5-point stage is skipped")
-    l1: str = opt("irls", "second stage: l1-PnP drop of the worst fraction: 'irls' (exact l1 by IRLS + simplex polish, same keep-mask as the LP), 'lp' (HiGHS), 'none'")
+    l1: str = opt("irls", "second stage: l1-PnP drop of the worst fraction: 'irls' (exact l1 by IRLS + simplex polish, "
+                          "same keep-mask as the LP), 'lp' (HiGHS), 'none'")
     l1_drop: float = opt(0.10, "fraction of largest l1-PnP reprojection errors dropped")
     use_export_flags: bool = opt(False, "track exports only: drop the exporter's own outlier flags first")
 
@@ -41,8 +42,8 @@ class TriangulationConfig:
 
     min_depth_m: float = opt(0.5, "points nearer than this are not used (m)")
     max_depth_m: float = opt(100.0, "points farther than this are not used (m)")
-    min_disparity_px: float = opt(0.0, "points with less stereo disparity than this are not used (px): the "
-                                       "depth cap in the rig's own terms, the same for every baseline")
+    min_disparity_px: float = opt(0.0, "points with less stereo disparity than this are not used (px): a depth cap the "
+                                       "same for every baseline")
     fill_points: int = opt(100, "a keyframe with fewer points inside the far gate (max_depth_m, min_disparity_px) "
                                 "keeps the points beyond it too (0: never)")
     min_points: int = opt(20, "a keyframe with fewer triangulated points cannot be tracked against")
@@ -65,29 +66,23 @@ class PnPConfig:
 
     method: str = opt("be-w", "'be-w' (Bias-Eli + weighted LM step), 'be' (Bias-Eli only), 'ls' (CPnP LS + "
                               "weighted step), 'epnp' / 'sqpnp' (OpenCV + LM)")
-    refine_steps: int = opt(1, "weighted LM steps after the linear estimate at least (the method: 1, S2 argues one "
-                                "step is asymptotically enough from a start within the noise)")
-    step_tol: float = opt(4.0, "[PROPOSAL] ... then further steps while the last one was longer than this in the "
-                               "pose's own metric (delta^T H delta, i.e. squared standard deviations): the start "
-                               "was not within the noise, as on planar floors where the linear model is "
-                               "degenerate; 0: exactly refine_steps steps")
+    refine_steps: int = opt(1, "weighted LM steps after the linear estimate, at least (the method: 1)")
+    step_tol: float = opt(4.0, "[PROPOSAL] more steps while the last one exceeded this in the pose's own metric "
+                               "(delta^T H delta); 0: exactly refine_steps steps")
     max_refine_steps: int = opt(10, "at most this many weighted steps")
     depth_weights: bool = opt(False, "linear-step row weights Z^-3/2 (the authors' code) instead of 1")
-    current_noise: bool = opt(True, "add the current-frame noise sigma^2 I to the step's weights (spec 5.4 "
-                                    "[PROPOSAL]: every image is noisy in real data; docs/method.md 5.4)")
+    current_noise: bool = opt(True, "add the current frame's noise sigma^2 I to the step's weights (spec 5.4 "
+                                    "[PROPOSAL])")
     min_points: int = opt(12, "fewer verified matches than this is a tracking failure")
-    fallback_sigmas: float = opt(4.0, "be-w/ls: when the median reprojection error after the step exceeds this many "
-                                      "noise std (the linear model is degenerate for coplanar points), the step is "
-                                      "redone from SQPnP and the better pose kept; 0: never")
+    fallback_sigmas: float = opt(4.0, "be-w/ls: redo the step from SQPnP (the better pose kept) when the median "
+                                      "reprojection error exceeds this many noise std; 0: never")
     fallback_min_px: float = opt(0.5, "... but never below this error (px)")
-    reverify: bool = opt(True, "[PROPOSAL] when the tracked pose's median reprojection error still exceeds that limit, "
-                               "drop the outliers of a 3D-2D RANSAC (OpenCV AP3P) and redo the pose; the better "
-                               "pose is kept (every --pnp method)")
+    reverify: bool = opt(True, "[PROPOSAL] when the pose's median reprojection error exceeds that limit, drop the "
+                               "outliers of a 3D-2D RANSAC (AP3P) and redo the pose; the better kept")
     reverify_sigmas: float = opt(3.0, "... its inlier threshold in noise std (at least 1 px)")
-    chi2_gate: float = opt(13.8, "[PROPOSAL] be-w/ls: after the pose, matches whose reprojection residual exceeds "
-                                 "this squared Mahalanobis norm under the weights' own covariance (chi-square, "
-                                 "2 dof: 13.8 = 99.9 %) are dropped and the weighted steps redone on the rest, "
-                                 "until the set stops changing (wrong stereo depths; docs/method.md 5.4); 0: off")
+    chi2_gate: float = opt(13.8, "[PROPOSAL] be-w/ls: drop matches beyond this squared Mahalanobis residual "
+                                 "(chi-square 2 dof; 13.8 = 99.9 %) and redo the steps, until the set is stable; 0: "
+                                 "off")
     max_median_px: float = opt(10.0, "a pose whose median reprojection error exceeds this is a failure (px); "
                                            "loose, so ablations without the LM step (be) are not judged by it")
 
@@ -108,8 +103,7 @@ class BAConfig:
 
     enabled: bool = opt(True, "run the BA at each keyframe insertion")
     kernel: str = opt("truncated", "'truncated' (the authors' choice) or 'huber' (the same delta in both), 'none'")
-    delta_sigmas: float = opt(3.0, "kernel threshold delta = this x the noise std sigma_hat (tighter helps the renders, "
-                                   "hurts the real sequences: docs/method.md 10)")
+    delta_sigmas: float = opt(3.0, "kernel threshold delta = this x the noise std sigma_hat")
     max_iter: int = opt(10, "LM iterations")
     tol: float = opt(1e-4, "stop when the relative step or the relative robust-cost decrease is below this")
     max_reproj_ratio: float = opt(1.5, "reject a BA whose new-keyframe pose reprojects the keyframe points with a "
@@ -135,10 +129,9 @@ class InitConfig:
     """Stereo-IMU initialisation with known scale (spec 9 [PROPOSAL])."""
 
     still_min_s: float = opt(1.0, "a standstill start is initialised after this long at rest (s); gravity and gyro "
-                                  "bias are then re-estimated over the whole standstill while it lasts")
-    still_max_flow_px: float = opt(2.0, "at rest: image motion since a reference frame below this (90th "
-                                        "percentile over the features of a fitted similarity transform, px; EuRoC's MAV at rest jitters by up "
-                                        "to 1.2 px, 0.15 deg)")
+                                  "bias re-estimated over the standstill while it lasts")
+    still_max_flow_px: float = opt(2.0, "at rest: image motion since a reference frame below this (px, 90th percentile "
+                                        "over the features of a fitted similarity transform)")
     still_lag_s: float = opt(0.5, "the gyro bias of a standstill leaves out its last this many seconds (its end is "
                                    "detected late)")
     still_persist: int = opt(3, "... on this many consecutive frames before the images say 'moving'")
@@ -153,8 +146,7 @@ class InitConfig:
                                       "motion after it (stereo-IMU initialisation, only b_a adopted)")
     ba_prior_sigma: float = opt(0.05, "zero-mean prior on the accelerometer bias (m/s^2, spec 9.6)")
     pose_sigma_m: float = opt(0.001, "position noise of the stereo-odometry poses in the initialisation's weights (m); "
-                                     "0 trusts them exactly: measured on a 0.15 m/s^2 moving-start render, gravity off by 0.99 deg "
-                                     "at 0, 0.04 deg at 1 mm (the b_a prior can then hold the bias/tilt ambiguity)")
+                                     "0: the poses are taken as exact")
 
 
 @dataclass
@@ -162,47 +154,39 @@ class FusionConfig:
     """GeVI per-frame attitude / pose refinement (spec 8)."""
 
     mode: str = opt("bcd", "'bcd' (6-DOF refinement with the jointly estimated gravity-prior covariance) or '4dof' "
-                           "(4-DOF BE + GN only; roll/pitch from the IMU-only attitude filter of `gevi imu`)")
+                           "(4-DOF step, roll/pitch from the IMU-only filter)")
     adaptive: bool = opt(True, "estimate the gravity-prior covariance (false: spec 8's fixed-weight baseline, "
                                 "Sigma = (sigma_a / g)^2 I at the accelerometer noise floor)")
-    max_iter: int = opt(2, "BCD iterations (spec 8.3: 1-2). A third lowered J by < 2e-7 relative on euroc_micro "
-                           "and left pool-easy_s1/s2's ATE equal to 1e-6 m (docs/method.md 9b step 4)")
+    max_iter: int = opt(2, "BCD iterations (spec 8.3: 1-2)")
     lm_iters: int = opt(2, "LM iterations per chi-step")
     sigma_hi: float = opt(0.2, "upper bound of the gravity-prior std (sqrt of the largest eigenvalue)")
-    max_window_frames: int = opt(20, "at most this many frames in a BCD window: older frames after the keyframe are "
-                                      "folded into one gyro-chain link (cost O(K^3); euroc_micro, one keyframe for 95 "
-                                      "frames: 5.5 ms -> see docs)")
+    max_window_frames: int = opt(20, "at most this many frames in a BCD window: the oldest after the keyframe are "
+                                     "folded into one gyro-chain link (the cost is cubic in it)")
     kf_tilt_floor_deg: float = opt(0.05, "lower bound of the keyframe roll/pitch prior std (deg)")
     kf_tilt_gravity_gain: float = opt(1.0, "with the BA: new keyframe tilt = BA tilt + gain x (BCD tilt - BA tilt); 1: "
                                            "the BCD tilt (gravity-anchored), 0: the BA tilt (visual) [PROPOSAL]")
-    sigma_memory_s: float = opt(2.0, "conjugate prior of the gravity-prior covariance from the innovations (specific "
-                                     "force against the gyro-predicted tilt) of the last this many seconds, weighted "
-                                     "as that many residuals [PROPOSAL, spec 8.3]; 0: window residuals only")
-    acc_window_s: float = opt(0.4, "acceleration compensation [PROPOSAL]: the gravity residual removes the body "
-                                   "acceleration fitted to the visually tracked positions of the last this many "
-                                   "seconds from the specific force; 0: the paper's model (specific force only)")
-    gravity_window_s: float = opt(2.0, "window gravity [PROPOSAL]: the gravity direction of the gravity residual from "
-                                       "the visually tracked positions of the last this many seconds against the "
-                                       "twice-integrated IMU (pipelines/window_gravity.py), where the frames span at "
-                                       "least 1 s; elsewhere, and with 0, the specific force minus acc_window_s's "
-                                       "acceleration")
-    bias_window_s: float = opt(20.0, "accelerometer bias in flight [PROPOSAL]: the horizontal bias re-estimated at each "
-                                     "keyframe from the window gravity of the last this many seconds against the "
-                                     "gyro-chained orientations (yaw separates a body-fixed bias from gravity, "
-                                     "pipelines/acc_bias.py); 0: the bias of the initialisation throughout")
+    sigma_memory_s: float = opt(2.0, "[PROPOSAL, spec 8.3] conjugate prior of the gravity-prior covariance: the "
+                                     "innovations of the last this many seconds (s); 0: window residuals only")
+    acc_window_s: float = opt(0.4, "acceleration compensation [PROPOSAL]: remove the acceleration fitted to the "
+                                   "tracked positions of the last this many seconds (s); 0: specific force only (the "
+                                   "paper)")
+    gravity_window_s: float = opt(2.0, "window gravity [PROPOSAL]: gravity from the tracked positions of the last this "
+                                       "many seconds against the integrated IMU (s); 0: specific force minus "
+                                       "acc_window_s's acceleration")
+    bias_window_s: float = opt(20.0, "accelerometer bias in flight [PROPOSAL]: the horizontal bias re-estimated at "
+                                     "each keyframe over the last this many seconds; 0: the initialisation's bias "
+                                     "throughout")
     bias_max_std: float = opt(0.02, "that estimate is adopted when its posterior std (m/s^2, horizontal) is below this")
-    acc_order: int = opt(0, "degree of that position fit: 0 chooses 2 or 3 per frame by the smaller estimated mean "
-                            "squared error (the lag of 2 against the noise of 3); 2 or 3 forces it")
+    acc_order: int = opt(0, "degree of that position fit: 2 or 3; 0 chooses per frame the one with the smaller "
+                            "estimated mean squared error")
 
 
 @dataclass
 class RunConfig:
     """Run-level settings."""
 
-    seed: int = opt(0, "seed of GeVI's 3-point RANSAC, per frame: frame k draws from (seed, k) whatever earlier "
-                       "frames drew (determinism: the same seed, sequence, start and config give the same run). "
-                       "OpenCV's 5-point RANSAC (CFO, --ransac 5pt) has a fixed seed of its own: it does not "
-                       "change with this")
+    seed: int = opt(0, "seed of GeVI's 3-point RANSAC: frame k draws from (seed, k), so a run is reproducible (CFO's "
+                       "OpenCV 5-point RANSAC has its own fixed seed)")
     align: str = opt("se3", "alignment of the run's evaluation (se3 for stereo)")
     rpe_delta: float = opt(1.0, "RPE delta in frames")
 
