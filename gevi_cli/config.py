@@ -109,10 +109,6 @@ def load_yaml(path: Path) -> dict:
     return read_mapping(Path(path), empty_ok=True, what="config file")
 
 
-def to_dict(cfg) -> dict:
-    return dataclasses.asdict(cfg)
-
-
 def flat_items(cfg, prefix: str = "") -> list[tuple[str, object, str]]:
     """(dotted key, default value, help) for every leaf field (``gevi run --dump-config``)."""
     out = []

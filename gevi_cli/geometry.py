@@ -74,11 +74,6 @@ def matrix_to_quat_wxyz(R: np.ndarray) -> np.ndarray:
     return q.reshape(R.shape[:-2] + (4,))
 
 
-def quat_wxyz_to_matrix(q: np.ndarray) -> np.ndarray:
-    q = np.asarray(q, float)
-    return Rotation.from_quat(np.roll(q.reshape(-1, 4), -1, axis=1)).as_matrix().reshape(q.shape[:-1] + (3, 3))
-
-
 def small_rotation(rx_deg: float, ry_deg: float, rz_deg: float) -> np.ndarray:
     """A rotation from a small rotation vector given in degrees."""
     return Rotation.from_rotvec(np.radians([rx_deg, ry_deg, rz_deg])).as_matrix()

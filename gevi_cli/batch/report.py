@@ -16,7 +16,6 @@ from __future__ import annotations
 import base64
 import html
 import json
-import math
 import re
 import time
 from pathlib import Path
@@ -268,5 +267,3 @@ def markdown_to_html(md: str, base: Path, title: str) -> str:
     return "\n".join(out)
 
 
-def nan_to_none(v):
-    return None if v is None or (isinstance(v, float) and math.isnan(v)) else v

@@ -19,7 +19,7 @@ from gevi_cli.datasets.kalibr import yaml_real, yaml_whole
 from gevi_cli.datasets.registry import register
 from gevi_cli.datasets.sequence import ImuData, Sequence, StereoFrame, pair_stereo
 from gevi_cli.datasets.yamlio import load_yaml, matrix, require
-from gevi_cli.errors import DataError, GeviError, LayoutError
+from gevi_cli.errors import DataError, LayoutError
 from gevi_cli.trajectory import Trajectory, read_trajectory
 from gevi_cli.trajectory.formats import _is_number, _looks_like_header, read_text
 
@@ -260,11 +260,6 @@ def _imread_gray(path: str) -> np.ndarray:
     if image is None:
         raise DataError(path, "cannot be read as an image (missing, truncated or not an image)")
     return image
-
-
-def _check_groundtruth_option(path) -> None:
-    if path is not None and not Path(path).is_file():
-        raise GeviError("--groundtruth", f"{path}: no such file")
 
 
 @staticmethod

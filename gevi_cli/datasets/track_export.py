@@ -65,9 +65,6 @@ class TrackFrame:
     outlier: np.ndarray
     stereo: StereoObs | None
 
-    @property
-    def is_keyframe(self) -> bool:
-        return self.stereo is not None
 
 
 def detect(path: str | Path) -> bool:

@@ -94,9 +94,3 @@ def to_evo(traj, t0_ns: int = 0) -> PoseTrajectory3D:
     )
 
 
-def matrices_to_evo(T: np.ndarray, stamps_s: np.ndarray | None = None) -> PoseTrajectory3D:
-    """(n, 4, 4) pose matrices as an evo trajectory (stamps default to the index)."""
-    T = np.asarray(T, dtype=np.float64)
-    if stamps_s is None:
-        stamps_s = np.arange(len(T), dtype=np.float64)
-    return PoseTrajectory3D(poses_se3=list(T), timestamps=np.asarray(stamps_s, dtype=np.float64))

@@ -56,14 +56,6 @@ class EstimateSpec:
     hint_dirs: list = field(default_factory=list)
 
 
-@dataclass
-class SequenceSpec:
-    """A sequence with its ground-truth source (file or dataset folder)."""
-
-    name: str
-    gt_path: Path | None
-
-
 def is_gt_name(p: Path) -> bool:
     return bool(_GT_RE.search(p.stem))
 

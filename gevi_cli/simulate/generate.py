@@ -16,7 +16,7 @@ from typing import Iterator
 
 import numpy as np
 
-from gevi_cli.geometry import invert_pose, make_T
+from gevi_cli.geometry import make_T
 from gevi_cli.simulate.camera import CameraModel, RenderRig
 from gevi_cli.simulate.constants import MOCAP_NOISE_POS_M, MOCAP_NOISE_ROT_DEG, MOCAP_RATE_HZ
 from gevi_cli.simulate.imu import ImuParams, ImuSeries, synthesize_imu
@@ -302,11 +302,6 @@ def build_sequence(config: SimulationConfig) -> SimulatedSequence:
     rig = build_rig(spec, cam, c.baseline_m)
     motion = build_motion(spec, c.seed, c.duration_s, a_max=c.a_max, moving_start=c.moving_start)
     return SimulatedSequence(c, rig, motion, lambda: build_scene(spec, c.seed, motion, c.duration_s))
-
-
-def relative_pose(T_a: np.ndarray, T_b: np.ndarray) -> np.ndarray:
-    """``T_a^-1 T_b`` for stacks of 4x4 poses."""
-    return invert_pose(T_a) @ T_b
 
 
 __all__ = ["SimulationConfig", "SimulatedSequence", "build_sequence", "T0_NS", "make_T"]
