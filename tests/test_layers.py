@@ -24,7 +24,6 @@ LAYERS = [
 #: one of these once it is gone (then delete it here)
 KNOWN = {
     ("gevi_cli.batch.config", "gevi_cli.commands.run"),  # batch options parsed by `gevi run`'s click command
-    ("gevi_cli.batch.config", "gevi_cli.commands.simulate"),  # the presets' names and resolution parsing
 }
 
 

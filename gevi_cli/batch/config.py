@@ -314,7 +314,7 @@ def parse_method_args(args: list[str], where: str) -> tuple:
 
 
 def _methods(ctx, node, trials) -> list:
-    from gevi_cli.commands.run import METHODS
+    from gevi_cli.pipelines.config import METHODS
 
     out = []
     for item in _seq_list(ctx, node, "methods"):
@@ -348,7 +348,7 @@ def _methods(ctx, node, trials) -> list:
 
 
 def _sim(ctx, node, where) -> SimSpec:
-    from gevi_cli.commands.simulate import PRESET_NAMES, _resolution
+    from gevi_cli.simulate.presets import PRESET_NAMES, parse_resolution
 
     s = ctx.mapping(node, where, SIM_KEYS)
     preset = ctx.scalar(s, "preset", where, str)
@@ -357,7 +357,7 @@ def _sim(ctx, node, where) -> SimSpec:
                       f"unknown preset {preset!r}; choose one of {', '.join(PRESET_NAMES)}")
     res = ctx.scalar(s, "resolution", where, str)
     try:
-        res = _resolution(res)
+        res = parse_resolution(res)
     except GeviError as exc:
         raise ctx.err(s["resolution"][1], f"{where}.resolution", exc.message) from None
     fmt = ctx.scalar(s, "format", where, str, "euroc",

@@ -10,8 +10,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import click  # noqa: E402
 
 from gevi_cli.commands.options import add_sequence_options  # noqa: E402
-
-METHODS = ("gevi", "cfo")
+from gevi_cli.pipelines.config import METHODS  # noqa: E402
 
 
 @click.command("run")

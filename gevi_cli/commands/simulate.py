@@ -6,8 +6,8 @@ import re
 import click
 
 from gevi_cli.errors import GeviError
+from gevi_cli.simulate.presets import PRESET_NAMES, parse_resolution
 
-PRESET_NAMES = ("pool-easy", "pool-hard", "euroc-like", "kitti-like", "kitti-highway", "mav")
 MAV_MIN_DURATION_S = 20.0
 #: options that only concern images: refused with the IMU-only mav preset
 IMAGE_OPTIONS = ("--rate", "--resolution", "--baseline", "--no-distortion", "--no-image-noise", "--supersample",
@@ -22,18 +22,6 @@ Examples:
   gevi simulate pool-easy out/pool_imu --imu-only --duration 60
   gevi simulate --sample          # path of the cached built-in sample (rendered on first use)
 """
-
-
-def _resolution(value: str | None):
-    if value is None:
-        return None
-    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", value)
-    if not m:
-        raise GeviError("--resolution", f"{value!r} is not WIDTHxHEIGHT, e.g. 640x360")
-    w, h = int(m.group(1)), int(m.group(2))
-    if not (16 <= w <= 8192 and 16 <= h <= 8192):
-        raise GeviError("--resolution", f"{w}x{h} is out of range (16..8192 pixels per side)")
-    return w, h
 
 
 @click.command("simulate", epilog=EPILOG, context_settings={"help_option_names": ["-h", "--help"]})
@@ -133,7 +121,7 @@ def command(preset, out_dir, fmt, duration, rate, resolution, baseline, seed, im
         return
     if name is not None and (not re.fullmatch(r"[A-Za-z0-9_.+-]+", name) or fmt != "bag"):
         raise GeviError("--name", "is only for --format bag and must be a plain file name (letters, digits, _ . + -)")
-    res = _resolution(resolution)
+    res = parse_resolution(resolution)
 
     from gevi_cli.simulate.generate import SimulationConfig, simulate
     from gevi_cli.simulate.imu import ImuParams

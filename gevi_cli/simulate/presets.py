@@ -232,3 +232,23 @@ def _car_motion(mp: CarParams, rng: np.random.Generator) -> CarMotion:
     pitch = Sines.random(rng, np.radians(0.6), (1.0, 4.0), 3)
     roll = Sines.random(rng, np.radians(0.6), (1.5, 5.0), 3)
     return CarMotion(0.0, mp.speed, mp.height, surge, road, lane, bump, pitch, roll)
+
+#: what `gevi simulate` and batch configs accept: the image presets, and the IMU-only multirotor flight
+PRESET_NAMES = tuple(PRESETS) + ("mav",)
+
+
+def parse_resolution(value: str | None) -> tuple[int, int] | None:
+    """``"WIDTHxHEIGHT"`` -> (width, height) px (16..8192 each), None for None; else a one-line GeviError."""
+    import re
+
+    from gevi_cli.errors import GeviError
+
+    if value is None:
+        return None
+    m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", value)
+    if not m:
+        raise GeviError("--resolution", f"{value!r} is not WIDTHxHEIGHT, e.g. 640x360")
+    w, h = int(m.group(1)), int(m.group(2))
+    if not (16 <= w <= 8192 and 16 <= h <= 8192):
+        raise GeviError("--resolution", f"{w}x{h} is out of range (16..8192 pixels per side)")
+    return w, h
