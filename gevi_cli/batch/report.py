@@ -58,6 +58,34 @@ def runtime_table(runs, methods) -> Table:
                  list(RUNTIME_STAGES), cells, note=note, average_row=False, row_label="stage")
 
 
+#: the roll/pitch numbers `gevi run` writes into status.json for a stereo-inertial run: (key, title)
+TILT_METRICS = (("tilt_rmse_deg", "Roll/pitch error RMSE [deg] — gravity direction, no alignment"),
+                ("tilt_trend_deg_per_min", "Roll/pitch error trend [deg/min] — slope over 5 s windows after the "
+                                           "initialisation (runs of 15 s or more)"))
+
+
+def tilt_tables(runs, methods, sequences) -> list[Table]:
+    """Per stereo-inertial method and sequence, the trials' roll/pitch RMSE and its trend (status.json)."""
+    from gevi_cli.run.folder import read_status
+
+    tables = []
+    for key, title in TILT_METRICS:
+        cells = {}
+        for r in runs:
+            if r["method"] not in methods or r["state"] == "crashed":
+                continue
+            v = ((read_status(Path(r["run_dir"])) or {}).get("evaluation") or {}).get(key)
+            cell = cells.setdefault((r["sequence"], r["method"]), Cell())
+            cell.n_trials += 1
+            if v is not None:
+                cell.values.append(float(v))
+                cell.n_lost += int(r["state"] == "lost-tracking")
+        table = Table(key, title, list(methods), list(sequences), cells)
+        if not table.is_empty():
+            tables.append(table)
+    return tables
+
+
 def _tables(res, methods, sequences, inertial, settings):
     from gevi_cli.evaluation.report import build_tables
 
@@ -88,7 +116,8 @@ def write_batch_report(report_dir: Path, cfg, specs, baselines, res, settings, *
     inertial = {m.name for m in cfg.methods if m.method == "gevi"}
     se3, posyaw = _tables(res, methods, sequences, inertial, settings)
     runtime = runtime_table(res.runs, [m.name for m in cfg.methods])
-    tables = se3 + posyaw + [runtime]
+    tilt = tilt_tables(res.runs, [m.name for m in cfg.methods if m.name in inertial], sequences)
+    tables = se3 + posyaw + tilt + [runtime]
     seq_info = {s: {"poses": len(g), "span_s": g.duration_s, "path_length_m": g.path_length_m}
                 for s, g in res.gts.items()}
     inputs = {"config": str(cfg.path), "runs": {s.run_id: s.run_dir for s in specs},
@@ -114,8 +143,8 @@ def write_batch_report(report_dir: Path, cfg, specs, baselines, res, settings, *
                                  for b in baselines],
                    "cells": _cells(se3)}
     (report_dir / "results.json").write_text(json.dumps(results_doc, indent=1) + "\n")
-    md = _markdown(cfg, specs, baselines, res, se3, posyaw, runtime, skipped, pngs, report_dir, elapsed_s, executor,
-                   __version__)
+    md = _markdown(cfg, specs, baselines, res, se3, posyaw + tilt, runtime, skipped, pngs, report_dir, elapsed_s,
+                   executor, __version__)
     (report_dir / "report.md").write_text(md)
     (report_dir / "report.html").write_text(markdown_to_html(md, report_dir, f"gevi batch: {cfg.name}"))
     return report_dir / "report.md"
@@ -203,8 +232,8 @@ def _markdown(cfg, specs, baselines, res, se3, posyaw, runtime, skipped, pngs, r
     order = sorted(se3, key=lambda t: (t.key not in HEADLINE, HEADLINE.index(t.key) if t.key in HEADLINE else 0))
     L += ["", "## Accuracy (SE(3), body frame)", ""] + [render_markdown(t) for t in order]
     if posyaw:
-        L += ["## Stereo-inertial methods, posyaw alignment", ""] + [render_markdown(t) for t in posyaw
-                                                                       if "rot_mean" not in t.key]
+        L += ["## Stereo-inertial methods: posyaw alignment, roll/pitch against gravity", ""]
+        L += [render_markdown(t) for t in posyaw if "rot_mean" not in t.key]
     L += ["## Runtime", "", render_markdown(runtime)]
     if pngs:
         L += ["## Plots", ""] + [f"![{p.stem}]({p.relative_to(report_dir)})" for p in pngs] + [""]
