@@ -23,7 +23,7 @@ SIM_KEYS = {"preset", "seed", "duration", "rate", "resolution", "baseline", "for
             "moving_start"}
 METHOD_KEYS = {"name", "run", "trials"}
 BASELINE_KEYS = {"name", "path", "file", "format", "frame", "T_B_C0", "stamps", "optional", "sequences"}
-EVAL_KEYS = {"rpe_delta", "min_coverage", "max_diff", "plots"}
+EVAL_KEYS = {"rpe_delta", "min_coverage", "max_diff", "plots", "online"}
 #: `gevi run` options a method entry may use (the rest belong to the batch: sequence, seed, output)
 METHOD_OPTIONS = {"--method", "--pnp", "--no-ba", "--ransac", "--no-adaptive", "--no-fusion", "--set",
                   "--imu-time-offset", "--config"}
@@ -141,6 +141,7 @@ class EvalOptions:
     min_coverage: float = 0.9  # fraction of the GT time span
     max_diff_s: float = 0.01
     plots: bool = True
+    online: bool = False  # also evaluate each run's online (tracking-time) trajectory, traj_online_body.tum
 
 
 @dataclass
@@ -267,7 +268,8 @@ def load_batch_config(path) -> BatchConfig:
                                min_coverage=ctx.scalar(ev, "min_coverage", "eval", float, 0.9,
                                                        lambda v: None if 0 <= v <= 1 else "must be a fraction 0..1"),
                                max_diff_s=ctx.scalar(ev, "max_diff", "eval", float, 0.01, _positive),
-                               plots=ctx.scalar(ev, "plots", "eval", bool, True))
+                               plots=ctx.scalar(ev, "plots", "eval", bool, True),
+                               online=ctx.scalar(ev, "online", "eval", bool, False))
     for key in ("methods", "sequences"):
         if key not in top:
             raise ctx.err(top_node, key, "missing; a batch needs methods: and sequences:")

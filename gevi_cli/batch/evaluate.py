@@ -23,6 +23,7 @@ class BatchResults:
 
     se3: list = field(default_factory=list)
     posyaw: list = field(default_factory=list)
+    online: list = field(default_factory=list)  # SE(3) results of the online trajectories (eval: online)
     runs: list = field(default_factory=list)  # dicts: run_id, method, sequence, trial, state, message, ...
     gts: dict = field(default_factory=dict)  # sequence -> ground truth Trajectory (trial 1)
     problems: list = field(default_factory=list)  # "<sequence>: why it could not be evaluated"
@@ -74,7 +75,7 @@ def _T(spec_T, T_seq):
     return load_T_B_C0(Path(spec_T))
 
 
-def evaluate_batch(specs, baselines, settings, inertial_methods: set) -> BatchResults:
+def evaluate_batch(specs, baselines, settings, inertial_methods: set, online: bool = False) -> BatchResults:
     """Evaluate every finished run of ``specs`` and every baseline (see module docstring)."""
     from gevi_cli.evaluation.evaluate import evaluate_pair, failed
     from gevi_cli.evaluation.inputs import run_primary
@@ -122,6 +123,18 @@ def evaluate_batch(specs, baselines, settings, inertial_methods: set) -> BatchRe
                     out.gts[spec.sequence] = load(gt_path)[0]
                 except GeviError as exc:
                     out.problems.append(f"{spec.sequence}: {exc.one_line()}")
+        if online and primary is not None:
+            # the poses as tracked, before any BA of their window (gevi run's traj_online_body.tum)
+            path = Path(spec.run_dir) / "traj_online_body.tum"
+            try:
+                gt, T, raw = load(gt_path)
+                gt = _clip_to_run(gt, Path(spec.run_dir), settings.max_diff_s)
+                r = evaluate_pair(gt, read_trajectory(path, name=spec.method), settings, "se3", method=spec.method,
+                                  sequence=spec.sequence, trial=trial, T_B_C0=T, gt_raw=raw)
+            except GeviError as exc:
+                r = failed(spec.method, spec.sequence, trial, path, exc.one_line())
+            r.lost = marker["state"] == "lost-tracking"
+            out.online.append(r)
         if out.se3 and out.se3[-1].ok:
             run["ate_m"] = out.se3[-1].ate.trans_rmse
             run["rpe_m"] = out.se3[-1].rpe.trans_rmse if out.se3[-1].rpe is not None else None

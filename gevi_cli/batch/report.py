@@ -86,6 +86,20 @@ def tilt_tables(runs, methods, sequences) -> list[Table]:
     return tables
 
 
+def _online_tables(res, methods, sequences, settings) -> list[Table]:
+    """ATE and RPE of the online trajectories (``eval: online``), keys prefixed ``online_``."""
+    from gevi_cli.evaluation.report import build_tables
+
+    if not res.online:
+        return []
+    out = []
+    for t in build_tables(res.online, methods, sequences, settings):
+        if t.key in HEADLINE:
+            t.key, t.title = f"online_{t.key}", f"online: {t.title}"
+            out.append(t)
+    return out
+
+
 def _tables(res, methods, sequences, inertial, settings):
     from gevi_cli.evaluation.report import build_tables
 
@@ -117,7 +131,8 @@ def write_batch_report(report_dir: Path, cfg, specs, baselines, res, settings, *
     se3, posyaw = _tables(res, methods, sequences, inertial, settings)
     runtime = runtime_table(res.runs, [m.name for m in cfg.methods])
     tilt = tilt_tables(res.runs, [m.name for m in cfg.methods if m.name in inertial], sequences)
-    tables = se3 + posyaw + tilt + [runtime]
+    online = _online_tables(res, [m.name for m in cfg.methods], sequences, settings)
+    tables = se3 + posyaw + tilt + online + [runtime]
     seq_info = {s: {"poses": len(g), "span_s": g.duration_s, "path_length_m": g.path_length_m}
                 for s, g in res.gts.items()}
     inputs = {"config": str(cfg.path), "runs": {s.run_id: s.run_dir for s in specs},
@@ -143,8 +158,8 @@ def write_batch_report(report_dir: Path, cfg, specs, baselines, res, settings, *
                                  for b in baselines],
                    "cells": _cells(se3)}
     (report_dir / "results.json").write_text(json.dumps(results_doc, indent=1) + "\n")
-    md = _markdown(cfg, specs, baselines, res, se3, posyaw + tilt, runtime, skipped, pngs, report_dir, elapsed_s,
-                   executor, __version__)
+    md = _markdown(cfg, specs, baselines, res, se3, posyaw + tilt, online, runtime, skipped, pngs, report_dir,
+                   elapsed_s, executor, __version__)
     (report_dir / "report.md").write_text(md)
     (report_dir / "report.html").write_text(markdown_to_html(md, report_dir, f"gevi batch: {cfg.name}"))
     return report_dir / "report.md"
@@ -171,8 +186,8 @@ def _cells(tables):
     return out
 
 
-def _markdown(cfg, specs, baselines, res, se3, posyaw, runtime, skipped, pngs, report_dir, elapsed_s, executor,
-              version) -> str:
+def _markdown(cfg, specs, baselines, res, se3, posyaw, online, runtime, skipped, pngs, report_dir, elapsed_s,
+              executor, version) -> str:
     states = {}
     for r in res.runs:
         states[r["state"]] = states.get(r["state"], 0) + 1
@@ -234,6 +249,9 @@ def _markdown(cfg, specs, baselines, res, se3, posyaw, runtime, skipped, pngs, r
     if posyaw:
         L += ["## Stereo-inertial methods: posyaw alignment, roll/pitch against gravity", ""]
         L += [render_markdown(t) for t in posyaw if "rot_mean" not in t.key]
+    if online:
+        L += ["## Online trajectories (as tracked, before the BA of their window), SE(3)", ""]
+        L += [render_markdown(t) for t in online]
     L += ["## Runtime", "", render_markdown(runtime)]
     if pngs:
         L += ["## Plots", ""] + [f"![{p.stem}]({p.relative_to(report_dir)})" for p in pngs] + [""]

@@ -84,7 +84,8 @@ def run_batch(config_path, out=None, *, jobs: int = 1, force: bool = False, exec
     _dispatch(todo, executor, jobs, scheduler, echo, tty, execute_all)
     settings = EvalSettings(align="se3", n_align=-1, max_diff_s=cfg.eval.max_diff_s, rpe_delta=cfg.eval.rpe_delta,
                             rpe_unit="frames", min_coverage=cfg.eval.min_coverage, est_frame="same", kitti=True)
-    res = evaluate_batch(specs, baselines, settings, {m.name for m in cfg.methods if m.method == "gevi"})
+    res = evaluate_batch(specs, baselines, settings, {m.name for m in cfg.methods if m.method == "gevi"},
+                         online=cfg.eval.online)
     report = write_batch_report(out / "report", cfg, specs, baselines, res, settings, skipped=skipped,
                                 elapsed_s=time.perf_counter() - t0, executor=executor)
     bad = [r for r in res.runs if r["state"] != "ok"]

@@ -1,5 +1,6 @@
 """One small batch shared by every batch test (session scope): a 5 s pool-easy render (10 Hz,
-376x240; rendered once into a test cache), GeVI and CFO, two trials each, run with ``--jobs 2``."""
+376x240; rendered once into a test cache), GeVI and CFO, two trials each, run with ``--jobs 2``; the
+online trajectories evaluated too."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -10,6 +11,7 @@ SMALL_CONFIG = """\
 name: small
 trials: 2
 cache: {cache}
+eval: {{online: true}}
 methods:
   - gevi
   - cfo

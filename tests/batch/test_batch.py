@@ -208,3 +208,15 @@ def test_absent_optional_sequence_is_skipped_and_left_out_by_regress(small_batch
     assert code == 0, text
     assert "note: gone: left out, the batch skipped it" in text and "| gone |" not in text
     assert "| pool-easy-5s | cfo | ATE |" in text
+
+
+def test_report_has_online_and_roll_pitch_tables(small_batch):
+    """eval: online adds the as-tracked trajectories' ATE/RPE; GeVI's roll/pitch error is tabulated per trial."""
+    out, code, _ = small_batch
+    tables = out / "report" / "tables"
+    assert (tables / "online_ate_trans_rmse.csv").is_file() and (tables / "online_rpe_trans_rmse.csv").is_file()
+    assert (tables / "tilt_rmse_deg.csv").is_file()
+    md = (out / "report" / "report.md").read_text()
+    assert "## Online trajectories" in md and "Roll/pitch error RMSE" in md
+    rows = (tables / "tilt_rmse_deg.csv").read_text()
+    assert "gevi" in rows and "cfo" not in rows.splitlines()[0]

@@ -74,7 +74,7 @@ def test_ready_configs_parse():
     from gevi_cli.batch.config import load_batch_config
     from gevi_cli.batch.plan import baseline_runs, expand
 
-    for name in ("ci", "pool", "kitti-like", "gevi_sweep"):
+    for name in ("ci", "pool", "kitti-like", "gevi_sweep", "sim_sweep"):
         cfg = load_batch_config(REPO / "configs" / "batch" / f"{name}.yaml")
         assert expand(cfg, Path("/tmp/x")), name
     pool = load_batch_config(REPO / "configs" / "batch" / "pool.yaml")
