@@ -20,12 +20,6 @@ LAYERS = [
     {"api", "commands", "cli"},
 ]
 
-#: wrong-way imports still to be removed, each with where it is; a new one fails the test, and so does
-#: one of these once it is gone (then delete it here)
-KNOWN = {
-    ("gevi_cli.batch.config", "gevi_cli.commands.run"),  # batch options parsed by `gevi run`'s click command
-}
-
 
 def _unit(module: str) -> str:
     parts = module.split(".")
@@ -49,10 +43,9 @@ def test_every_import_points_down_or_across():
     graph = import_graph(include_lazy=True)
     found = wrong_way(graph)
     lines = {(s, d): graph[s][d] for s, d in found}
-    new = sorted(found - KNOWN)
+    new = sorted(found)
     assert not new, "wrong-way imports:\n" + "\n".join(
         f"  {s} (line {lines[(s, d)]}) -> {d}: layer {_layer(s)} imports layer {_layer(d)}" for s, d in new)
-    assert not KNOWN - found, f"gone, delete from KNOWN: {sorted(KNOWN - found)}"
 
 
 @pytest.mark.parametrize("src, dst", [("gevi_cli.datasets.registry", "gevi_cli.frontend.stereo"),
@@ -62,7 +55,7 @@ def test_a_planted_wrong_way_import_is_found(src, dst):
     """The check sees an upward import wherever it is (here added to the graph as a lazy import would be)."""
     graph = import_graph(include_lazy=True)
     graph[src] = {**graph[src], dst: 1}
-    assert (src, dst) in wrong_way(graph) - KNOWN
+    assert (src, dst) in wrong_way(graph)
 
 
 def test_every_package_has_a_layer():

@@ -24,9 +24,6 @@ SIM_KEYS = {"preset", "seed", "duration", "rate", "resolution", "baseline", "for
 METHOD_KEYS = {"name", "run", "trials"}
 BASELINE_KEYS = {"name", "path", "file", "format", "frame", "T_B_C0", "stamps", "optional", "sequences"}
 EVAL_KEYS = {"rpe_delta", "min_coverage", "max_diff", "plots", "online"}
-#: `gevi run` options a method entry may use (the rest belong to the batch: sequence, seed, output)
-METHOD_OPTIONS = {"--method", "--pnp", "--no-ba", "--ransac", "--no-adaptive", "--no-fusion", "--set",
-                  "--imu-time-offset", "--config"}
 FORMATS = ("tum", "euroc", "kitti", "kitti-idx")
 
 
@@ -289,34 +286,9 @@ def _seq_list(ctx, node, key):
     return node.value
 
 
-def parse_method_args(args: list[str], where: str) -> tuple:
-    """(RunRequest field, value) pairs from `gevi run` options, checked by `gevi run`'s own parser."""
-    import click
-
-    from gevi_cli.commands.run import command as run_command
-
-    for a in args:
-        if a.startswith("-") and a.split("=")[0] not in METHOD_OPTIONS:
-            raise GeviError(where, f"option {a} is not a method option; allowed: {', '.join(sorted(METHOD_OPTIONS))} "
-                                   "(sequence, seed and output are the batch's)")
-    try:
-        ctx = run_command.make_context("run", list(args), resilient_parsing=False)
-    except click.exceptions.UsageError as exc:
-        raise GeviError(where, exc.format_message()) from None
-    if ctx.params.get("sequence"):
-        raise GeviError(where, f"unexpected argument {ctx.params['sequence']!r} (options only)")
-    fields = {"method", "sets", "pnp", "no_ba", "ransac", "no_adaptive", "no_fusion", "imu_time_offset", "config_file"}
-    params = []
-    for k, v in ctx.params.items():
-        if k in fields and v not in (None, False, ()):
-            params.append((k, tuple(v) if isinstance(v, (list, tuple)) else v))
-    if not dict(params).get("method"):
-        raise GeviError(where, "name the method first: gevi ... or cfo ...")
-    return tuple(sorted(params))
-
-
 def _methods(ctx, node, trials) -> list:
     from gevi_cli.pipelines.config import METHODS
+    from gevi_cli.run.method_options import parse_method_args
 
     out = []
     for item in _seq_list(ctx, node, "methods"):

@@ -10,33 +10,18 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 import click  # noqa: E402
 
 from gevi_cli.commands.options import add_sequence_options  # noqa: E402
-from gevi_cli.pipelines.config import METHODS  # noqa: E402
+from gevi_cli.run.method_options import method_options  # noqa: E402
 
 
 @click.command("run")
 @click.argument("sequence", type=click.Path(), required=False)
-@click.option("--method", type=click.Choice(METHODS), default=None,
-              help="gevi: gravity-enhanced stereo-inertial odometry; cfo: CurrentFeature Odometry (stereo). "
-                   "Default: gevi when the sequence has an IMU, else cfo.")
+@method_options
 @click.option("--start", type=click.IntRange(min=0), default=0, help="First frame (index).")
 @click.option("--max-frames", type=click.IntRange(min=1), default=None, help="Number of frames to run.")
 @click.option("--stride", type=click.IntRange(min=1), default=1, show_default=True, metavar="K",
               help="Use every K-th frame (frame j = original frame K*j, its stamp kept; --start and --max-frames "
                    "count strided frames); the IMU and the ground truth stay whole. Not for track exports.")
-@click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
-              help="YAML overriding the defaults (after gevi_cli/configs/<kind>.yaml).")
-@click.option("--set", "sets", multiple=True, metavar="STAGE.KEY=VALUE", help="Override one key (repeatable).")
-@click.option("--pnp", type=click.Choice(["be-w", "be", "ls", "epnp", "sqpnp"]), default=None,
-              help="Pose estimator (ablations; = --set pnp.method=...).")
-@click.option("--no-ba", is_flag=True, help="No epipolar local BA (= --set ba.enabled=false).")
 @click.option("--seed", type=int, default=None, help="Seed of GeVI's 3-point RANSAC (= --set run.seed=...); OpenCV's 5-point RANSAC (CFO) has its own fixed seed.")
-@click.option("--ransac", type=click.Choice(["3pt", "5pt"]), default=None,
-              help="gevi: verification RANSAC (ablation; = --set verify.ransac=...).")
-@click.option("--no-adaptive", is_flag=True, help="gevi: fixed gravity-prior weight (= --set fusion.adaptive=false).")
-@click.option("--no-fusion", is_flag=True, help="gevi: 4-DOF only, roll/pitch from the IMU alone "
-                                                "(= --set fusion.mode=4dof).")
-@click.option("--imu-time-offset", type=float, default=None, metavar="SECONDS",
-              help="gevi: camera-IMU time shift t_imu = t_cam + shift (default: the calibration's).")
 @click.option("-o", "--out", default=None, type=click.Path(file_okay=False),
               help="Run folder (default results/<method>/<sequence>/<timestamp>/).")
 @click.option("--results-root", default="results", show_default=True, type=click.Path(file_okay=False),
