@@ -57,8 +57,8 @@ from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches
 from gevi_cli.pipelines.pose6 import (
     converged_limit_px,
     opencv_pnp,
-    pnp_ransac_inliers,
     reprojection_median_px,
+    reverified,
     tracked_pose6,
 )
 from gevi_cli.pipelines.recent_motion import RecentMotion
@@ -393,22 +393,15 @@ class GeviOdometry(InertialInitialisation, KeyframeOdometry):
         f, pc = self.camera.f, self.cfg.pnp
         med = reprojection_median_px(R, t, m.p, m.q, f)
         if pc.reverify and not med <= converged_limit_px(pc, self.sigma2, f):
-            # Outliers the 3-point verification cannot see (shifted along their epipolar lines, wrong stereo
-            # depths) drag the pose: found by a 3D-2D RANSAC, and the pose step once more without them,
-            # kept when the median error over all matches collapses -- CFO's re-verification
-            # (pose6.tracked_pose6).  The BCD's state is put back when the second pose is not kept.
-            keep = pnp_ransac_inliers(m.p, m.q, max(pc.reverify_sigmas * np.sqrt(self.sigma2), 1.0 / f))
-            if keep is not None and pc.min_points <= keep.sum() < len(m.p):
-                saved = self._bcd_state()
-                try:
-                    R2, t2 = self._gevi_pose(m.subset(keep), cov[keep], L_k, L_c)
-                    med2 = reprojection_median_px(R2, t2, m.p, m.q, f)
-                except (TrackingFailure, est.EstimatorError):
-                    med2 = np.inf
-                if np.isfinite(med2) and (med2 < 0.5 * med or not np.isfinite(med)):
-                    R, t, med = R2, t2, med2
-                else:
-                    self._restore_bcd_state(saved)
+            # CFO's re-verification (pose6.reverified) with the GeVI step; the BCD's state (window tilts,
+            # Sigma) is put back when the second pose is not kept
+            saved = self._bcd_state()
+            again = reverified(m.p, m.q, med, pc, self.sigma2, f,
+                               lambda keep: self._gevi_pose(m.subset(keep), cov[keep], L_k, L_c))
+            if again is None:
+                self._restore_bcd_state(saved)
+            else:
+                (R, t), med = again
         if not np.isfinite(med) or med > pc.max_median_px:
             raise TrackingFailure(f"median reprojection error {med:.2f} px after the GeVI pose step")
         return make_T(R, t)

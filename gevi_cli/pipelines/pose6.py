@@ -155,6 +155,31 @@ def _finite(R: np.ndarray, t: np.ndarray) -> bool:
     return bool(np.all(np.isfinite(R)) and np.all(np.isfinite(t)))
 
 
+def reverified(p: np.ndarray, q: np.ndarray, med: float, cfg: PnPConfig, sigma2: float, f: float, pose_of):
+    """The pose step redone without the outliers of a 3D-2D RANSAC [PROPOSAL; docs/method.md 5.4], or None.
+
+    Outliers that the epipolar verification cannot see (a group shifted along its epipolar lines:
+    measured on pool-hard_s2, 9 of 63 tracks 38 px off; wrong stereo depths) drag every least-squares
+    pose.  OpenCV's AP3P RANSAC on the reprojection error (``cfg.reverify_sigmas`` noise std, at least
+    1 px) finds them; ``pose_of(keep)`` redoes the pose step on the inliers and returns a tuple whose
+    first two items are ``R, t``.  Returned, with its median reprojection error over *all* matches,
+    only when that error at least halves ``med`` (a minority of gross outliers drags the pose of all:
+    without them the median collapses; tracks merely noisier than sigma_hat do not do that -- KITTI
+    04's exported colour tracks: 3 frames, 60 % kept, the median barely lower).
+    """
+    keep = pnp_ransac_inliers(p, q, max(cfg.reverify_sigmas * np.sqrt(sigma2), 1.0 / f))
+    if keep is None or not cfg.min_points <= keep.sum() < len(p):
+        return None
+    try:
+        pose = pose_of(keep)
+    except (TrackingFailure, est.EstimatorError):
+        return None
+    med2 = reprojection_median_px(pose[0], pose[1], p, q, f)
+    if np.isfinite(med2) and (med2 < 0.5 * med or not np.isfinite(med)):
+        return pose, med2
+    return None
+
+
 def tracked_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig, sigma2: float, f: float):
     """The 6-DOF tracking step of the pipelines: (R_ck, t_ck, fell_back) or :class:`TrackingFailure`.
 
@@ -168,22 +193,10 @@ def tracked_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig,
     if med is None:
         med = reprojection_median_px(R, t, p, q, f)
     if cfg.reverify and med > converged_limit_px(cfg, sigma2, f):
-        # Outliers that the epipolar verification cannot see (a group shifted along its epipolar
-        # lines: measured on pool-hard_s2, 9 of 63 tracks 38 px off) drag every least-squares pose;
-        # a 3D-2D RANSAC on the reprojection error finds them [PROPOSAL; docs/method.md 5.4].
-        keep = pnp_ransac_inliers(p, q, max(cfg.reverify_sigmas * np.sqrt(sigma2), 1.0 / f))
-        if keep is not None and cfg.min_points <= keep.sum() < len(p):
-            try:
-                R2, t2, fb2 = estimate_pose6(p[keep], cov[keep], q[keep], cfg, sigma2, f)
-            except TrackingFailure:
-                R2 = None
-            if R2 is not None and _finite(R2, t2):
-                med2 = reprojection_median_px(R2, t2, p, q, f)
-                # a minority of gross outliers drags the pose of all: without them the median error
-                # over all matches collapses; tracks merely noisier than sigma_hat do not do that
-                # (KITTI 04's exported colour tracks: 3 frames, 60 % kept, the median barely lower)
-                if med2 < 0.5 * med:
-                    R, t, fallback, med = R2, t2, fb2, med2
+        again = reverified(p, q, med, cfg, sigma2, f,
+                           lambda keep: estimate_pose6(p[keep], cov[keep], q[keep], cfg, sigma2, f))
+        if again is not None:
+            (R, t, fallback), med = again
     if cfg.chi2_gate > 0 and cfg.method in ("be-w", "ls"):
         R, t, med = _chi2_refit(R, t, p, cov, q, cfg, sigma2, f, med)
     if med > cfg.max_median_px:
