@@ -13,7 +13,6 @@ what ``gevi run`` adds.  Poses: 4x4, metres; stamps in ns.
 """
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -63,18 +62,15 @@ def run(sequence, method: str | None = None, config: str | None = None, sets=(),
 
     from gevi_cli.run.driver import run_odometry
     from gevi_cli.run.folder import RunStatus
-    from gevi_cli.run.session import RunRequest, build, choose_method, frame_range, open_input, resolve_config
+    from gevi_cli.run.session import RunRequest, make_pipeline, resolve
     from gevi_cli.run.sinks import FRAME_COLUMNS, STAGES, MemorySink
 
     req = RunRequest(sequence=str(sequence), method=method, start=start, max_frames=max_frames, stride=stride,
                      config_file=None if config is None else str(config), sets=tuple(sets), seed=seed, quiet=True,
                      groundtruth=None if groundtruth is None else str(groundtruth))
-    source, kind = open_input(req)
-    method, _ = choose_method(req, source)
-    req = dataclasses.replace(req, method=method)
-    cfg, _ = resolve_config(req, kind, method)
-    start, stop = frame_range(req, len(source))
-    frontend, odometry = build(source, kind, cfg, method, warn=lambda msg: None, start=start)
+    resolved = resolve(req)
+    source, method, cfg, start, stop = resolved.source, resolved.req.method, resolved.cfg, resolved.start, resolved.stop
+    frontend, odometry = make_pipeline(resolved, warn=lambda msg: None)
     memory = MemorySink()
     status = RunStatus(method=method, stride=stride, sequence=source.name)
     run_odometry(source, odometry, status, [memory, *sinks], T_B_C0=np.asarray(frontend.camera.T_B_C0), start=start,
@@ -82,8 +78,7 @@ def run(sequence, method: str | None = None, config: str | None = None, sets=(),
     frames = pd.DataFrame(memory.frame_rows, columns=list(FRAME_COLUMNS))
     timings = pd.DataFrame(memory.timing_rows, columns=["index", "t_ns", "total"] + list(STAGES))
     states = pd.DataFrame(memory.state_rows) if memory.state_rows else None
-    online = Trajectory.from_matrices(np.array([r[0] for r in memory.online_rows], dtype=np.int64),
-                                      np.array([r[1] for r in memory.online_rows]).reshape(-1, 4, 4), frame="body")
+    online = memory.online_trajectory()
     est = memory.trajectory("body")
     gt = getattr(source, "groundtruth", None)
     pair = None

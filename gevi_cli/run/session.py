@@ -169,6 +169,38 @@ def dump_config(req: RunRequest) -> str:
     return "\n".join(lines)
 
 
+@dataclass(frozen=True)
+class Resolved:
+    """A run request resolved against its input: the request with its method chosen (and why), the
+    opened source and its kind, the effective configuration and where it came from, the frame range."""
+
+    req: RunRequest
+    source: object
+    kind: str
+    why: str
+    cfg: object
+    sources: list
+    start: int
+    stop: int
+
+
+def resolve(req: RunRequest) -> Resolved:
+    """Open the input, choose the method, resolve the configuration and the frame range (one-line errors)."""
+    source, kind = open_input(req)
+    method, why = choose_method(req, source)
+    req = dataclasses.replace(req, method=method)
+    cfg, sources = resolve_config(req, kind, method)
+    start, stop = frame_range(req, len(source))
+    return Resolved(req, source, kind, why, cfg, sources, start, stop)
+
+
+def make_pipeline(r: Resolved, warn=None):
+    """(front end, odometry) of a resolved run, after checking the images have the calibration's size."""
+    if r.kind != "ov2slam-tracks":
+        _check_image_size(r.source, r.start, r.req.sequence)
+    return build(r.source, r.kind, r.cfg, r.req.method, warn=warn, start=r.start)
+
+
 def build(source, kind: str, cfg, method: str, warn=None, start: int = 0):
     """(front end, odometry) for ``source``."""
     from gevi_cli.pipelines.cfo import CurrentFeatureOdometry
@@ -264,20 +296,17 @@ def execute(req: RunRequest, echo=print) -> int:
         if not sample_path().exists():
             echo("gevi run: no SEQUENCE given; rendering the built-in pool-easy sample (once, about a minute)")
         req = dataclasses.replace(req, sequence=str(sample_sequence(progress=not req.quiet and sys.stderr.isatty())))
-    source, kind = open_input(req)
-    method, why = choose_method(req, source)
-    req = dataclasses.replace(req, method=method)
-    cfg, sources = resolve_config(req, kind, method)
-    stop = frame_range(req, len(source))[1]
+    resolved = resolve(req)
+    req, source, kind, cfg, sources, stop = (resolved.req, resolved.source, resolved.kind, resolved.cfg,
+                                             resolved.sources, resolved.stop)
+    method = req.method
     for w in getattr(source, "warnings", []):
         echo(f"gevi: warning: {w}", err=True)
     def warn(msg):
         echo(f"gevi: warning: {msg}", err=True)
 
-    echo(f"gevi run: method {method} ({why})")
-    if kind != "ov2slam-tracks":
-        _check_image_size(source, req.start, req.sequence)
-    frontend, odometry = build(source, kind, cfg, req.method, warn=warn, start=req.start)
+    echo(f"gevi run: method {method} ({resolved.why})")
+    frontend, odometry = make_pipeline(resolved, warn)
     # read (and check) the ground truth before the run folder exists: a KITTI --gt whose rows do not match
     # the sequence's times.txt is refused in one line without leaving an empty run behind
     gt_traj = getattr(source, "groundtruth", None)

@@ -125,8 +125,14 @@ class MemorySink:
 
     def trajectory(self, frame: str = "body") -> Trajectory:
         """The final poses (``frame`` "body" or "cam0"), in stamp order."""
-        rows = sorted(self.final_rows, key=lambda r: r[0])
-        k = 2 if frame == "body" else 1
-        t = np.array([r[0] for r in rows], dtype=np.int64)
-        T = np.array([r[k] for r in rows]).reshape(-1, 4, 4)
-        return Trajectory.from_matrices(t, T, frame=frame)
+        return _trajectory(self.final_rows, 2 if frame == "body" else 1, frame)
+
+    def online_trajectory(self) -> Trajectory:
+        """The online (as tracked) body poses, in stamp order."""
+        return _trajectory(self.online_rows, 1, "body")
+
+
+def _trajectory(rows, k: int, frame: str) -> Trajectory:
+    rows = sorted(rows, key=lambda r: r[0])
+    t = np.array([r[0] for r in rows], dtype=np.int64)
+    return Trajectory.from_matrices(t, np.array([r[k] for r in rows]).reshape(-1, 4, 4), frame=frame)
