@@ -99,6 +99,8 @@ def evaluate_batch(specs, baselines, settings, inertial_methods: set, online: bo
                "frames_tracked": st.get("frames_tracked", 0), "elapsed_s": st.get("elapsed_s", 0.0),
                "lost_intervals": st.get("lost_intervals", []), "wall_s": marker.get("wall_s", 0.0),
                "run_dir": spec.run_dir}
+        # a stereo-inertial run's roll/pitch error, as gevi run evaluated it (the report's tilt tables)
+        run.update({k: v for k, v in (st.get("evaluation") or {}).items() if k.startswith("tilt_")})
         out.runs.append(run)
         primary = run_primary(Path(spec.run_dir)) if marker["state"] != "crashed" else None
         aligns = ["se3"] + (["posyaw"] if spec.method in inertial_methods else [])

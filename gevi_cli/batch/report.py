@@ -65,16 +65,15 @@ TILT_METRICS = (("tilt_rmse_deg", "Roll/pitch error RMSE [deg] — gravity direc
 
 
 def tilt_tables(runs, methods, sequences) -> list[Table]:
-    """Per stereo-inertial method and sequence, the trials' roll/pitch RMSE and its trend (status.json)."""
-    from gevi_cli.run.folder import read_status
-
+    """Per stereo-inertial method and sequence, the trials' roll/pitch RMSE and its trend (each run's
+    ``tilt_*`` numbers, which :func:`~gevi_cli.batch.evaluate.evaluate_batch` took from its status.json)."""
     tables = []
     for key, title in TILT_METRICS:
         cells = {}
         for r in runs:
             if r["method"] not in methods or r["state"] == "crashed":
                 continue
-            v = ((read_status(Path(r["run_dir"])) or {}).get("evaluation") or {}).get(key)
+            v = r.get(key)
             cell = cells.setdefault((r["sequence"], r["method"]), Cell())
             cell.n_trials += 1
             if v is not None:
