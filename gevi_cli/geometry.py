@@ -153,40 +153,29 @@ def right_jacobian(w) -> np.ndarray:
     return np.eye(3) - (1 - np.cos(th)) / th**2 * K + (th - np.sin(th)) / th**3 * (K @ K)
 
 
-def rot_x(a) -> np.ndarray:
+def _elementary(a, i: int, j: int, k: int) -> np.ndarray:
+    """Rotation by angle(s) ``a`` about axis ``k``: ``c`` at (i,i), (j,j), ``-s`` at (i,j), ``s`` at (j,i)."""
     a = np.asarray(a, dtype=float)
     c, s = np.cos(a), np.sin(a)
     R = np.zeros(a.shape + (3, 3))
-    R[..., 0, 0] = 1.0
-    R[..., 1, 1] = c
-    R[..., 1, 2] = -s
-    R[..., 2, 1] = s
-    R[..., 2, 2] = c
+    R[..., k, k] = 1.0
+    R[..., i, i] = c
+    R[..., i, j] = -s
+    R[..., j, i] = s
+    R[..., j, j] = c
     return R
+
+
+def rot_x(a) -> np.ndarray:
+    return _elementary(a, 1, 2, 0)
 
 
 def rot_y(a) -> np.ndarray:
-    a = np.asarray(a, dtype=float)
-    c, s = np.cos(a), np.sin(a)
-    R = np.zeros(a.shape + (3, 3))
-    R[..., 1, 1] = 1.0
-    R[..., 0, 0] = c
-    R[..., 0, 2] = s
-    R[..., 2, 0] = -s
-    R[..., 2, 2] = c
-    return R
+    return _elementary(a, 2, 0, 1)
 
 
 def rot_z(a) -> np.ndarray:
-    a = np.asarray(a, dtype=float)
-    c, s = np.cos(a), np.sin(a)
-    R = np.zeros(a.shape + (3, 3))
-    R[..., 2, 2] = 1.0
-    R[..., 0, 0] = c
-    R[..., 0, 1] = -s
-    R[..., 1, 0] = s
-    R[..., 1, 1] = c
-    return R
+    return _elementary(a, 0, 1, 2)
 
 
 def drot_z(a) -> np.ndarray:
