@@ -134,7 +134,7 @@ class KeyframeOdometry:
                 self.frontend.adopt(frame, again)
                 obs, topped_up = again, True
         self.obs = obs  # the front end's features of this frame (ids, pixels), for what subclasses judge from them
-        timings.update({f"fe_{k}": v for k, v in getattr(self.frontend, "timings", {}).items()})
+        timings.update({f"fe_{k}": v for k, v in self.frontend.timings.items()})
         timings["frontend"] = time.perf_counter() - t0
         res = FrameResult(self.index, int(frame.t_ns), np.eye(4))
         q_all = self.camera.normalize(obs.uv)  # once per frame: matching and the BA window share it
@@ -334,7 +334,7 @@ class KeyframeOdometry:
         cfg = self.cfg
         stereo = self.frontend.keyframe(frame)
         timings.update({f"fe_{k}": timings.get(f"fe_{k}", 0.0) + v
-                        for k, v in getattr(self.frontend, "timings", {}).items()})
+                        for k, v in self.frontend.timings.items()})
         new = make_keyframe(res.index, res.t_ns, res.T_w_c, stereo, self.camera, cfg.triangulation.min_depth_m,
                             cfg.triangulation.max_depth_m, cfg.triangulation.min_disparity_px,
                             cfg.triangulation.fill_points, float(np.sqrt(self.sigma2) * self.camera.f))
