@@ -19,6 +19,7 @@ class FrontEnd(Protocol):
     """
 
     camera: RectifiedStereo
+    timings: dict[str, float]  # stage -> seconds of the last call (track or keyframe)
 
     def track(self, frame, rotation=None, predicted=None) -> FeatureObs:
         """Left-image features of ``frame`` with the ids they had in earlier frames.  ``rotation``:

@@ -123,6 +123,25 @@ class KeyframeOdometry:
         """Track one frame; never raises for tracking problems (they become ``bridged`` frames)."""
         self.index += 1
         timings: dict[str, float] = {}
+        obs, predicted, topped_up = self._features(frame, timings)
+        res = FrameResult(self.index, int(frame.t_ns), np.eye(4))
+        T_ck, disp_px, left = self._pose_against_keyframe(frame, obs, predicted, topped_up, res, timings)
+        if self.index == 0:
+            res.T_w_c = np.eye(4)
+        elif T_ck is not None:
+            res.T_w_c = self.kf.T_w_k @ invert_pose(T_ck)
+        else:
+            res.T_w_c, res.status = self._bridge(res.t_ns)
+        res.sigma_px = float(np.sqrt(self.sigma2) * self.camera.f)
+        self._window_and_keyframe(frame, res, T_ck, disp_px, left, timings)
+        self._remember_motion(res)
+        res.timings = timings
+        self._tail = (frame, res)
+        return res
+
+    def _features(self, frame, timings) -> tuple:
+        """The front end's features of ``frame`` (topped up by re-acquisition when few keyframe points are
+        left), the prediction they were tracked with, and whether they were topped up."""
         t0 = time.perf_counter()
         predicted = self.predicted_pixels()
         obs = self.frontend.track(frame, self.rotation_prior(), predicted)
@@ -134,9 +153,14 @@ class KeyframeOdometry:
                 self.frontend.adopt(frame, again)
                 obs, topped_up = again, True
         self.obs = obs  # the front end's features of this frame (ids, pixels), for what subclasses judge from them
-        timings.update({f"fe_{k}": v for k, v in getattr(self.frontend, "timings", {}).items()})
+        timings.update({f"fe_{k}": v for k, v in self.frontend.timings.items()})
         timings["frontend"] = time.perf_counter() - t0
-        res = FrameResult(self.index, int(frame.t_ns), np.eye(4))
+        return obs, predicted, topped_up
+
+    def _pose_against_keyframe(self, frame, obs, predicted, topped_up: bool, res: FrameResult, timings) -> tuple:
+        """``(T_ck, mean image displacement px, the frame's left observations)``; ``T_ck`` None when the
+        frame cannot be tracked.  After a failure the keyframe's features are re-acquired by descriptor
+        and the pose step runs once more on them.  Fills the result's match counts and message."""
         q_all = self.camera.normalize(obs.uv)  # once per frame: matching and the BA window share it
         T_ck, failure, disp_px = None, "", 0.0
         if self.kf is not None:
@@ -166,15 +190,13 @@ class KeyframeOdometry:
                         self.reacquired += 1
         elif self.index > 0:
             failure = "no keyframe to track against"
-        if self.index == 0:
-            res.T_w_c = np.eye(4)
-        elif T_ck is not None:
-            res.T_w_c = self.kf.T_w_k @ invert_pose(T_ck)
-        else:
-            res.T_w_c, res.status = self._bridge(res.t_ns)
+        if T_ck is None:
             res.message = failure
-        res.sigma_px = float(np.sqrt(self.sigma2) * self.camera.f)
+        return T_ck, disp_px, est.ImageObs(obs.ids, q_all)
 
+    def _window_and_keyframe(self, frame, res: FrameResult, T_ck, disp_px: float, left, timings) -> None:
+        """The frame into the window of the current keyframe; a new keyframe (with the local BA) when the
+        source or the keyframe rule says so; the poses that can no longer change made final."""
         decision = self.frontend.keyframe_decision(frame)
         if decision is None:
             decision = self.kf is None or T_ck is None or self._keyframe_rule(res, disp_px)
@@ -182,7 +204,7 @@ class KeyframeOdometry:
             # every tracked feature enters the BA (its robust kernel handles the outliers): measured,
             # verified-only observations gave KITTI 04 gray ATE 0.417 m instead of 0.349 m
             T_kc = invert_pose(T_ck) if T_ck is not None else invert_pose(self.kf.T_w_k) @ res.T_w_c
-            self.window.append(WindowFrame(res.index, res.t_ns, est.ImageObs(obs.ids, q_all), T_kc, T_ck is not None))
+            self.window.append(WindowFrame(res.index, res.t_ns, left, T_kc, T_ck is not None))
         self.pending.append((res.index, res.T_w_c))
         if decision:
             t1 = time.perf_counter()
@@ -190,16 +212,16 @@ class KeyframeOdometry:
             timings["keyframe"] = time.perf_counter() - t1 - timings.get("ba", 0.0)
         elif not self.cfg.ba.enabled or self.kf is None:
             res.final, self.pending = self.pending, []
-        # the constant-velocity bridge continues from the best pose known (after BA at a keyframe)
+
+    def _remember_motion(self, res: FrameResult) -> None:
+        """The last pose and, after a tracked step, the step as the constant-velocity motion; the bridge
+        continues from the best pose known (after BA at a keyframe)."""
         T_now = self.kf.T_w_k if res.keyframe else res.T_w_c
         if self.T_w_last is not None and res.status == OK:
             # re-orthonormalised: bridged poses are products of velocities, rounding must not grow
             self.velocity = orthonormal_pose(invert_pose(self.T_w_last) @ T_now)
             self._moving = True
         self.T_w_last = T_now
-        res.timings = timings
-        self._tail = (frame, res)
-        return res
 
     def predicted_pixels(self) -> Prediction | None:
         """Where the keyframe's points should appear in the frame about to be tracked (rectified-left
@@ -334,7 +356,7 @@ class KeyframeOdometry:
         cfg = self.cfg
         stereo = self.frontend.keyframe(frame)
         timings.update({f"fe_{k}": timings.get(f"fe_{k}", 0.0) + v
-                        for k, v in getattr(self.frontend, "timings", {}).items()})
+                        for k, v in self.frontend.timings.items()})
         new = make_keyframe(res.index, res.t_ns, res.T_w_c, stereo, self.camera, cfg.triangulation.min_depth_m,
                             cfg.triangulation.max_depth_m, cfg.triangulation.min_disparity_px,
                             cfg.triangulation.fill_points, float(np.sqrt(self.sigma2) * self.camera.f))

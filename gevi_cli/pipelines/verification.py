@@ -38,6 +38,7 @@ class TwoStageVerification:
     """Stage (1), a RANSAC the subclass provides (``ransac(z, q, rng) -> mask``), then stage (2), the l1 drop."""
 
     label = "RANSAC"
+    iterations = 0  # minimal samples drawn in the last call, where the RANSAC counts them
 
     def __call__(self, z: np.ndarray, q: np.ndarray, p: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         keep = self.ransac(z, q, rng)

@@ -342,14 +342,15 @@ def test_start_of_motion_after_the_standstill_is_not_read_as_gravity(pool_render
     from gevi_cli.pipelines.gevi import GeviOdometry
     from gevi_cli.run.session import RunRequest, execute
 
-    used = {}  # t_ns -> (acc_dir the BCD used, standstill?) for the current frame of each BCD call
-    real = GeviOdometry._bcd
+    used = {}  # t_ns -> (acc_dir the BCD used, standstill?) for the current frame of each GeVI pose step
+    real = GeviOdometry._gevi_pose
 
-    def spy(self, m, cov, psi, t, *levelling):
-        used[int(self.cur.t_ns)] = (self.cur.acc_dir.copy(), bool(self.still))
-        return real(self, m, cov, psi, t, *levelling)
+    def spy(self, m, cov):
+        cur = self.plan.sample
+        used[int(cur.t_ns)] = (cur.acc_dir.copy(), bool(self.start.still))
+        return real(self, m, cov)
 
-    monkeypatch.setattr(GeviOdometry, "_bcd", spy)
+    monkeypatch.setattr(GeviOdometry, "_gevi_pose", spy)
     execute(RunRequest(sequence=str(pool_render), method="gevi", out=str(tmp_path / "r"), quiet=True),
             echo=lambda *a, **k: None)
     gt = np.loadtxt(pool_render / "mav0" / "state_groundtruth_estimate0" / "data.csv", delimiter=",", comments="#")

@@ -45,14 +45,15 @@ def test_image_prior_config_leaves_the_prediction_to_the_front_end():
 
 
 def test_gevi_takes_the_gyro_unless_the_config_says_image():
-    from gevi_cli.pipelines.gevi import GeviOdometry
-    from gevi_cli.pipelines.inertial_init import FrameSample
+    from gevi_cli.pipelines.gevi import GEVI, FramePlan, GeviOdometry
+    from gevi_cli.pipelines.inertial_state import FrameSample
 
     gevi = GeviOdometry.__new__(GeviOdometry)  # only what rotation_prior reads
     gevi.cfg = OdometryConfig()
     gevi.R_ic = exp_so3(np.array([0.3, -0.2, 1.0]))
     rv = np.array([0.002, -0.001, 0.02])
-    gevi.cur, gevi.t_prev, gevi._tail = FrameSample(1, 0, None, np.zeros(3), rv, 0.05, np.zeros(2)), 0, None
+    sample = FrameSample(1, 0, None, np.zeros(3), rv, 0.05, np.zeros(2))
+    gevi.plan, gevi.t_prev, gevi._tail = FramePlan(sample, GEVI), 0, None
     R_cp = gevi.rotation_prior()
     # the camera's rotation since the previous frame, previous -> current coordinates
     assert np.allclose(R_cp, (gevi.R_ic.T @ exp_so3(rv) @ gevi.R_ic).T, atol=1e-12)
