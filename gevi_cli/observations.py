@@ -11,33 +11,40 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from gevi_cli.camera import Intrinsics
+
 
 @dataclass(frozen=True)
 class RectifiedStereo:
     """The rig as the pipelines see it: a rectified pinhole pair with the right camera at +b on x.
 
-    ``fx, fy, cx, cy`` in pixels (shared by both rectified images), ``baseline`` in metres,
+    ``intrinsics`` (no distortion, pixels) is shared by both rectified images; ``baseline`` in metres;
     ``T_B_C0`` (4x4) maps *rectified* cam0 coordinates into the body frame.  In spec notation the
     stereo extrinsic is ``X_R = R_rl X_L + t_rl`` with ``R_rl = I`` and ``t_rl = (-b, 0, 0)``.
+    ``width``, ``height``, ``fx``, ``fy``, ``cx``, ``cy``, ``K``, ``f`` and :meth:`normalize` are the
+    intrinsics' own.
     """
 
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
+    intrinsics: Intrinsics
     baseline: float
     T_B_C0: np.ndarray = field(default_factory=lambda: np.eye(4), compare=False)
 
-    @property
-    def K(self) -> np.ndarray:
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+    def __post_init__(self):
+        if self.intrinsics.has_distortion:
+            raise ValueError("a rectified rig has no lens distortion")
 
-    @property
-    def f(self) -> float:
-        """Focal length for converting pixel noise to normalized noise (spec 1: sqrt(fx fy))."""
-        return float(np.sqrt(self.fx * self.fy))
+    width = property(lambda self: self.intrinsics.width)
+    height = property(lambda self: self.intrinsics.height)
+    fx = property(lambda self: self.intrinsics.fx)
+    fy = property(lambda self: self.intrinsics.fy)
+    cx = property(lambda self: self.intrinsics.cx)
+    cy = property(lambda self: self.intrinsics.cy)
+    K = property(lambda self: self.intrinsics.K)
+    f = property(lambda self: self.intrinsics.f)
+
+    def normalize(self, uv: np.ndarray) -> np.ndarray:
+        """Rectified pixels (n, 2) -> normalized coordinates (n, 2) (:meth:`Intrinsics.normalize`)."""
+        return self.intrinsics.normalize(uv)
 
     @property
     def R_rl(self) -> np.ndarray:
@@ -45,14 +52,11 @@ class RectifiedStereo:
 
     @property
     def t_rl(self) -> np.ndarray:
+        """Left -> right translation (metres): ``(-b, 0, 0)``."""
         return np.array([-self.baseline, 0.0, 0.0])
 
-    def normalize(self, uv: np.ndarray) -> np.ndarray:
-        """Pixels (n, 2) -> normalized image coordinates (n, 2)."""
-        uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
-        return np.column_stack([(uv[:, 0] - self.cx) / self.fx, (uv[:, 1] - self.cy) / self.fy])
-
     def depth_from_disparity(self, disparity_px: np.ndarray) -> np.ndarray:
+        """Depth (metres, rectified cam0 z) of disparities in pixels: ``fx b / d``, inf where d <= 0."""
         d = np.asarray(disparity_px, dtype=np.float64)
         with np.errstate(divide="ignore"):
             return np.where(d > 0, self.fx * self.baseline / np.where(d > 0, d, 1.0), np.inf)

@@ -123,7 +123,7 @@ def main(argv=None) -> int:
         def project(k):
             T = T_WC(k)
             Xr = ((P_W - T[:3, 3]) @ T[:3, :3]) @ rect.R0.T  # rectified left camera of frame k
-            return Xr, np.column_stack([cam.fx * Xr[:, 0] / Xr[:, 2] + cam.cx, cam.fy * Xr[:, 1] / Xr[:, 2] + cam.cy])
+            return Xr, cam.intrinsics.project(Xr)
 
         X0, uv0 = project(k0)
         # depth at the LK window's corners and edge midpoints: a window over an occlusion boundary

@@ -1,7 +1,7 @@
 """Strict layering of ``gevi_cli`` (issue 37): every import, function-level (lazy) ones included, points
 to the same layer or a lower one of :data:`LAYERS`.
 
-Bottom to top: the building blocks (the package's version, errors, geometry, configuration I/O,
+Bottom to top: the building blocks (the package's version, errors, geometry, camera intrinsics, configuration I/O,
 trajectories, the estimators, the dataset readers, the values a front end hands a back end); what turns sensor data into
 measurements (front end, IMU handling, simulator); the odometry pipelines; what runs and judges them
 (a run, the evaluation, batches); the user-facing surfaces (the Python API, the commands, the CLI).
@@ -13,7 +13,8 @@ import pytest
 from test_import_cycles import import_graph
 
 LAYERS = [
-    {"__init__", "errors", "geometry", "config", "shared_data", "observations", "trajectory", "estimators", "datasets"},
+    {"__init__", "errors", "geometry", "camera", "config", "shared_data", "observations", "trajectory", "estimators",
+     "datasets"},
     {"frontend", "inertial", "simulate", "studies"},
     {"pipelines"},
     {"run", "evaluation", "batch"},

@@ -2,7 +2,7 @@
 
 Frames: ``B`` = body = IMU frame; ``C0``/``C1`` = left/right camera (x right, y down, z forward).
 ``T_B_C0`` maps left-camera coordinates into the body frame (the EuRoC ``T_BS`` of cam0).
-Intrinsics are in pixels; translations in metres.
+Intrinsics (:class:`~gevi_cli.camera.Intrinsics`) are in pixels; translations in metres.
 """
 from __future__ import annotations
 
@@ -12,59 +12,8 @@ from functools import cached_property
 import cv2
 import numpy as np
 
+from gevi_cli.camera import Intrinsics
 from gevi_cli.geometry import invert_pose
-
-DISTORTION_MODELS = ("radtan", "equidistant", "none")
-
-
-@dataclass(frozen=True)
-class PinholeCamera:
-    """One camera: pinhole intrinsics (pixels), lens distortion and its pose in the body frame.
-
-    ``distortion`` holds (k1, k2, p1, p2) for radtan, (k1, k2, k3, k4) for equidistant, () for none.
-    """
-
-    width: int
-    height: int
-    fx: float
-    fy: float
-    cx: float
-    cy: float
-    distortion_model: str = "none"
-    distortion: tuple[float, ...] = ()
-    T_B_C: np.ndarray = field(default_factory=lambda: np.eye(4), compare=False)
-
-    def __post_init__(self):
-        if self.distortion_model not in DISTORTION_MODELS:
-            raise ValueError(f"distortion model {self.distortion_model!r} is not one of {DISTORTION_MODELS}")
-        object.__setattr__(self, "T_B_C", np.asarray(self.T_B_C, dtype=np.float64).reshape(4, 4))
-        object.__setattr__(self, "distortion", tuple(float(d) for d in self.distortion))
-
-    @property
-    def K(self) -> np.ndarray:
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
-
-    @property
-    def resolution(self) -> tuple[int, int]:
-        return self.width, self.height
-
-    @property
-    def dist_coeffs(self) -> np.ndarray:
-        return np.array(self.distortion, dtype=np.float64)
-
-    def undistort_points(self, uv: np.ndarray) -> np.ndarray:
-        """Pixels (n, 2) -> normalized image coordinates (n, 2) of the ideal pinhole camera."""
-        uv = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 1, 2)
-        if self.distortion_model == "equidistant":
-            out = cv2.fisheye.undistortPoints(uv, self.K, self.dist_coeffs)
-        elif self.distortion_model == "radtan":
-            # OpenCV's default 5 fixed-point iterations leave up to 0.4 px near the border of strong
-            # radtan lenses (EuRoC k1 = -0.28); iterate to convergence instead.
-            out = cv2.undistortPoints(uv, self.K, self.dist_coeffs, None, None, None,
-                                          (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12))
-        else:
-            out = (uv - [self.cx, self.cy]) / [self.fx, self.fy]
-        return out.reshape(-1, 2)
 
 
 @dataclass(frozen=True)
@@ -95,18 +44,20 @@ class Rectification:
 
 @dataclass(frozen=True)
 class StereoRig:
-    """Left (cam0) and right (cam1) camera with their body-frame extrinsics."""
+    """Left (cam0) and right (cam1) camera: their intrinsics and body-frame extrinsics.
 
-    cam0: PinholeCamera
-    cam1: PinholeCamera
+    ``T_B_C0``/``T_B_C1`` (4x4, metres) map left/right camera coordinates into the body frame
+    (``X_B = T_B_C X_C``, EuRoC's ``T_BS``).
+    """
 
-    @property
-    def T_B_C0(self) -> np.ndarray:
-        return self.cam0.T_B_C
+    cam0: Intrinsics
+    cam1: Intrinsics
+    T_B_C0: np.ndarray = field(compare=False)
+    T_B_C1: np.ndarray = field(compare=False)
 
-    @property
-    def T_B_C1(self) -> np.ndarray:
-        return self.cam1.T_B_C
+    def __post_init__(self):
+        for name in ("T_B_C0", "T_B_C1"):
+            object.__setattr__(self, name, np.asarray(getattr(self, name), dtype=np.float64).reshape(4, 4))
 
     @cached_property
     def T_C1_C0(self) -> np.ndarray:

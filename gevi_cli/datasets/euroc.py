@@ -14,7 +14,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
+from gevi_cli.camera import Intrinsics
+from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.datasets.kalibr import yaml_real, yaml_whole
 from gevi_cli.datasets.registry import register
 from gevi_cli.datasets.sequence import ImuData, Sequence, StereoFrame, pair_stereo
@@ -39,8 +40,8 @@ def find_mav0(path: Path) -> Path | None:
     return None
 
 
-def camera_from_sensor_yaml(path: Path) -> PinholeCamera:
-    """A :class:`PinholeCamera` from an EuRoC camera ``sensor.yaml``."""
+def camera_from_sensor_yaml(path: Path) -> tuple[Intrinsics, np.ndarray]:
+    """The intrinsics and the pose ``T_BS`` (camera -> body, 4x4, metres) of an EuRoC camera ``sensor.yaml``."""
     data = load_yaml(path)
     model = str(data.get("camera_model", "pinhole"))
     if model != "pinhole":
@@ -67,7 +68,13 @@ def camera_from_sensor_yaml(path: Path) -> PinholeCamera:
     if dist != "none" and len(coeffs) != 4:
         raise DataError(path, f"{name} distortion needs 4 coefficients, got {len(coeffs)}")
     T_B_C = matrix(require(data, "T_BS", path), path, "T_BS")
-    return PinholeCamera(width, height, fu, fv, cu, cv, dist, coeffs, T_B_C)
+    return Intrinsics(width, height, fu, fv, cu, cv, dist, coeffs), T_B_C
+
+
+def rig_from_sensor_yamls(folder: Path) -> StereoRig:
+    """The stereo rig of an EuRoC ``mav0`` folder (``cam0/sensor.yaml`` and ``cam1/sensor.yaml``)."""
+    (cam0, T_B_C0), (cam1, T_B_C1) = (camera_from_sensor_yaml(folder / cam / "sensor.yaml") for cam in ("cam0", "cam1"))
+    return StereoRig(cam0, cam1, T_B_C0, T_B_C1)
 
 
 def read_csv_rows(path: Path, what: str) -> list[tuple[int, list[str]]]:
@@ -211,8 +218,7 @@ class EurocSequence(Sequence):
         for cam in ("cam0", "cam1"):
             if not (mav0 / cam / "sensor.yaml").is_file():
                 raise LayoutError(mav0 / cam, "missing sensor.yaml (camera calibration)")
-        self._rig = StereoRig(camera_from_sensor_yaml(mav0 / "cam0" / "sensor.yaml"),
-                              camera_from_sensor_yaml(mav0 / "cam1" / "sensor.yaml"))
+        self._rig = rig_from_sensor_yamls(mav0)
         t0, f0, missing0 = read_image_list(mav0 / "cam0")
         t1, f1, missing1 = read_image_list(mav0 / "cam1")
         for cam, missing in (("cam0", missing0), ("cam1", missing1)):

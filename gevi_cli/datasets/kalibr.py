@@ -38,7 +38,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
+from gevi_cli.camera import Intrinsics
+from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.datasets.yamlio import load_yaml, matrix
 from gevi_cli.errors import DataError
 from gevi_cli.geometry import invert_pose
@@ -118,7 +119,7 @@ def read_camchain(path: Path) -> Camchain:
     else:
         raise DataError(path, "cam1 needs 'T_cam_imu' or 'T_cn_cnm1' (its pose relative to the IMU or to cam0)")
 
-    rig = StereoRig(_with_pose(cams["cam0"], T_B_C0), _with_pose(cams["cam1"], T_B_C1))
+    rig = StereoRig(cams["cam0"], cams["cam1"], T_B_C0, T_B_C1)
     topics = {side: str(data[cam]["rostopic"]) for side, cam in (("left", "cam0"), ("right", "cam1"))
               if data[cam].get("rostopic")}
     if shifts["cam1"] != shifts["cam0"]:
@@ -127,7 +128,7 @@ def read_camchain(path: Path) -> Camchain:
     return Camchain(rig, topics, warnings, shifts["cam0"])
 
 
-def _intrinsics(block: dict, path: Path, name: str) -> PinholeCamera:
+def _intrinsics(block: dict, path: Path, name: str) -> Intrinsics:
     if not isinstance(block, dict):
         raise DataError(path, f"'{name}' is not a mapping")
     model = str(block.get("camera_model", "pinhole"))
@@ -156,7 +157,7 @@ def _intrinsics(block: dict, path: Path, name: str) -> PinholeCamera:
         raise DataError(path, f"{name}: {dist_name} distortion needs 4 distortion_coeffs, got {len(coeffs)}")
     if not all(math.isfinite(v) for v in (fu, fv, cu, cv, *coeffs)) or fu <= 0 or fv <= 0:
         raise DataError(path, f"{name}: intrinsics must be finite with fu, fv > 0")
-    return PinholeCamera(width, height, fu, fv, cu, cv, dist, coeffs)
+    return Intrinsics(width, height, fu, fv, cu, cv, dist, coeffs)
 
 
 def _require(block: dict, key: str, path: Path, name: str):
@@ -180,11 +181,6 @@ def yaml_whole(value) -> int:
     if not math.isfinite(value) or value != int(value):
         raise ValueError(f"not a whole number: {value!r}")
     return int(value)
-
-
-def _with_pose(cam: PinholeCamera, T_B_C: np.ndarray) -> PinholeCamera:
-    return PinholeCamera(cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy, cam.distortion_model,
-                         cam.distortion, T_B_C)
 
 
 def read_imu_noise(path: Path) -> dict[str, float]:
@@ -213,9 +209,9 @@ def camchain_dict(rig: StereoRig, topics: dict[str, str] | None = None) -> dict:
     """The Kalibr camchain mapping of ``rig`` (``T_cam_imu = inv(T_B_C)``, plus ``T_cn_cnm1`` for cam1)."""
     topics = topics or {}
     out = {}
-    for name, side, cam in (("cam0", "left", rig.cam0), ("cam1", "right", rig.cam1)):
+    for name, side, cam, T_B_C in (("cam0", "left", rig.cam0, rig.T_B_C0), ("cam1", "right", rig.cam1, rig.T_B_C1)):
         block = {
-            "T_cam_imu": invert_pose(cam.T_B_C).tolist(),
+            "T_cam_imu": invert_pose(T_B_C).tolist(),
             "camera_model": "pinhole",
             "distortion_coeffs": [float(c) for c in cam.distortion],
             "distortion_model": cam.distortion_model,

@@ -15,7 +15,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
+from gevi_cli.camera import Intrinsics
+from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.datasets.registry import register
 from gevi_cli.datasets.sequence import Sequence, StereoFrame
 from gevi_cli.errors import DataError, GeviError, LayoutError
@@ -93,13 +94,14 @@ def read_times(path: Path) -> np.ndarray:
     return stamps
 
 
-def _camera_from_P(P: np.ndarray, P_ref: np.ndarray, width: int, height: int) -> PinholeCamera:
+def _camera_from_P(P: np.ndarray, P_ref: np.ndarray, width: int, height: int) -> tuple[Intrinsics, np.ndarray]:
+    """The intrinsics and the pose ``T_B_C`` (camera -> body = rectified cam0 of ``P_ref``) of a KITTI row ``P``."""
     K = P[:, :3]
     # P = K [I | t]: t = K^-1 P[:, 3] is the position of rectified cam0's origin in this camera.
     t_i = np.linalg.solve(K, P[:, 3]) - np.linalg.solve(P_ref[:, :3], P_ref[:, 3])
     T_B_C = np.eye(4)
     T_B_C[:3, 3] = -t_i
-    return PinholeCamera(width, height, K[0, 0], K[1, 1], K[0, 2], K[1, 2], "none", (), T_B_C)
+    return Intrinsics(width, height, K[0, 0], K[1, 1], K[0, 2], K[1, 2]), T_B_C
 
 
 def _single_sequence(path: Path) -> Path:
@@ -149,8 +151,8 @@ class KittiSequence(Sequence):
         if probe is None:
             raise DataError(self._left[0], "cannot be read as an image")
         h, w = probe.shape
-        self._rig = StereoRig(_camera_from_P(calib[P_left], calib["P0"], w, h),
-                              _camera_from_P(calib[P_right], calib["P0"], w, h))
+        (cam0, T_B_C0), (cam1, T_B_C1) = (_camera_from_P(calib[P], calib["P0"], w, h) for P in (P_left, P_right))
+        self._rig = StereoRig(cam0, cam1, T_B_C0, T_B_C1)
         self._gt_override = Path(groundtruth) if groundtruth is not None else None
 
     def _gt_path(self) -> Path | None:

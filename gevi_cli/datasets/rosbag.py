@@ -51,8 +51,7 @@ import numpy as np
 
 from gevi_cli.datasets import bag_streams as streams
 from gevi_cli.datasets.bagfile import bag_root, describe_error, header_stamp, is_bag, open_reader
-from gevi_cli.datasets.calibration import StereoRig
-from gevi_cli.datasets.euroc import DEFAULT_PAIR_TOLERANCE_NS, camera_from_sensor_yaml
+from gevi_cli.datasets.euroc import DEFAULT_PAIR_TOLERANCE_NS, rig_from_sensor_yamls
 from gevi_cli.datasets.kalibr import read_camchain, read_imu_noise
 from gevi_cli.datasets.registry import register
 from gevi_cli.datasets.sequence import ImuData, Sequence, StereoFrame, pair_stereo
@@ -215,8 +214,7 @@ class RosbagSequence(Sequence):
                 if folder is None:
                     raise GeviError("--calib", f"{calib}: folder has no cam0/sensor.yaml and cam1/sensor.yaml; pass an "
                                                "EuRoC mav0 folder or a Kalibr camchain YAML")
-                rig = StereoRig(camera_from_sensor_yaml(folder / "cam0" / "sensor.yaml"),
-                                camera_from_sensor_yaml(folder / "cam1" / "sensor.yaml"))
+                rig = rig_from_sensor_yamls(folder)
                 noise_files.append(folder / "imu0" / "sensor.yaml")
                 camchain_file = None
             else:

@@ -33,6 +33,7 @@ from typing import Iterator
 
 import numpy as np
 
+from gevi_cli.camera import Intrinsics
 from gevi_cli.datasets.kitti import read_calib
 from gevi_cli.errors import DataError, GeviError, LayoutError
 from gevi_cli.observations import FeatureObs, RectifiedStereo, StereoObs
@@ -212,7 +213,7 @@ def camera_from_calib(calib: str | Path, colour: bool, image_size: tuple[int, in
     T_B_C0 = np.eye(4)
     T_B_C0[:3, 3] = 0.0 - t_l  # (no -0.0 for the gray pair)
     w, h = image_size
-    return RectifiedStereo(int(w), int(h), float(fx), float(fy), float(cx), float(cy), baseline, T_B_C0), (left, right)
+    return RectifiedStereo(Intrinsics(w, h, fx, fy, cx, cy), baseline, T_B_C0), (left, right)
 
 
 # ----------------------------------------------------------------------------------------- reader

@@ -9,14 +9,11 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
+from gevi_cli.camera import Intrinsics
+from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.observations import RectifiedStereo
 
 _TOL = 1e-9
-
-
-def _undistorted(cam: PinholeCamera) -> bool:
-    return cam.distortion_model == "none" or not np.any(cam.dist_coeffs)
 
 
 def is_rectified(rig: StereoRig, tol: float = _TOL) -> bool:
@@ -25,7 +22,7 @@ def is_rectified(rig: StereoRig, tol: float = _TOL) -> bool:
     c0, c1 = rig.cam0, rig.cam1
     t = rig.t_rl
     return (
-        _undistorted(c0) and _undistorted(c1)
+        not c0.has_distortion and not c1.has_distortion
         and c0.resolution == c1.resolution
         and np.allclose(c0.K, c1.K, rtol=tol, atol=tol)
         and np.allclose(rig.R_rl, np.eye(3), rtol=0.0, atol=tol)
@@ -58,7 +55,7 @@ class Rectifier:
         self.passthrough = is_rectified(rig)
         if self.passthrough:
             c0 = rig.cam0
-            self.camera = RectifiedStereo(c0.width, c0.height, float(c0.fx), float(c0.fy), float(c0.cx), float(c0.cy),
+            self.camera = RectifiedStereo(Intrinsics(c0.width, c0.height, c0.fx, c0.fy, c0.cx, c0.cy),
                                           float(-rig.t_rl[0]), rig.T_B_C0.copy())
             self.R0 = np.eye(3)
             self._maps = None
@@ -67,9 +64,8 @@ class Rectifier:
         K = rect.P0[:3, :3]
         T_C0_C0r = np.eye(4)
         T_C0_C0r[:3, :3] = rect.R0.T
-        self.camera = RectifiedStereo(self.size[0], self.size[1], float(K[0, 0]), float(K[1, 1]),
-                                      float(K[0, 2]), float(K[1, 2]), float(rect.baseline),
-                                      rig.T_B_C0 @ T_C0_C0r)
+        self.camera = RectifiedStereo(Intrinsics(self.size[0], self.size[1], K[0, 0], K[1, 1], K[0, 2], K[1, 2]),
+                                      float(rect.baseline), rig.T_B_C0 @ T_C0_C0r)
         self.R0 = rect.R0.copy()
         # Float maps, not cv2.convertMaps' 1/32-px fixed-point ones: those were no faster here
         # (measured 0.27 vs 0.31 ms per 752x480 image) and quantise the sub-pixel geometry LK uses.

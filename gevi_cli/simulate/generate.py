@@ -16,8 +16,9 @@ from typing import Iterator
 
 import numpy as np
 
+from gevi_cli.camera import Intrinsics
 from gevi_cli.geometry import make_T
-from gevi_cli.simulate.camera import CameraModel, RenderRig
+from gevi_cli.simulate.camera import RenderRig
 from gevi_cli.simulate.constants import MOCAP_NOISE_POS_M, MOCAP_NOISE_ROT_DEG, MOCAP_RATE_HZ
 from gevi_cli.simulate.imu import ImuParams, ImuSeries, synthesize_imu
 from gevi_cli.simulate.motion import MotionSample
@@ -247,7 +248,7 @@ class SimulatedSequence:
 
         c = self.config
 
-        def cam_dict(cam: CameraModel):
+        def cam_dict(cam: Intrinsics):
             return {"resolution": [cam.width, cam.height], "intrinsics": [cam.fx, cam.fy, cam.cx, cam.cy],
                     "distortion_model": "radial-tangential", "distortion_coefficients": list(cam.distortion)}
 

@@ -10,8 +10,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from gevi_cli.camera import Intrinsics
 from gevi_cli.geometry import make_T, small_rotation
-from gevi_cli.simulate.camera import CameraModel, RenderRig
+from gevi_cli.simulate.camera import RenderRig
 from gevi_cli.simulate.imu import ImuParams
 from gevi_cli.simulate.motion import (
     CarMotion,
@@ -78,7 +79,7 @@ class PresetSpec:
 
     name: str
     description: str
-    camera: CameraModel          # reference intrinsics at the default resolution
+    camera: Intrinsics           # reference intrinsics (radtan lens) at the default resolution
     rate_hz: float
     baseline_m: float
     duration_s: float
@@ -93,10 +94,13 @@ class PresetSpec:
     sensor: SensorModel = field(default_factory=SensorModel)
 
 
-def _pinhole(width, height, hfov_deg, distortion, dc=(0.0, 0.0)) -> CameraModel:
+def _radtan(width, height, fx, fy, cx, cy, distortion=(0.0, 0.0, 0.0, 0.0)) -> Intrinsics:
+    return Intrinsics(width, height, fx, fy, cx, cy, "radtan", distortion)
+
+
+def _pinhole(width, height, hfov_deg, distortion, dc=(0.0, 0.0)) -> Intrinsics:
     f = (width / 2.0) / np.tan(np.radians(hfov_deg) / 2.0)
-    return CameraModel(width, height, f, f * 0.998, width / 2.0 - 0.5 + dc[0], height / 2.0 - 0.5 + dc[1],
-                       tuple(float(x) for x in distortion))
+    return _radtan(width, height, f, f * 0.998, width / 2.0 - 0.5 + dc[0], height / 2.0 - 0.5 + dc[1], distortion)
 
 
 _POOL_MOTION = HoverParams(
@@ -131,7 +135,7 @@ PRESETS: dict[str, PresetSpec] = {
     "euroc-like": PresetSpec(
         name="euroc-like",
         description="8 m x 6 m x 3 m textured room, forward-looking 752x480 stereo at 20 Hz, 0.11 m baseline",
-        camera=CameraModel(752, 480, 458.654, 457.296, 367.215, 248.375, (-0.25, 0.06, 1.9e-4, 1.8e-5)),
+        camera=_radtan(752, 480, 458.654, 457.296, 367.215, 248.375, (-0.25, 0.06, 1.9e-4, 1.8e-5)),
         rate_hz=20.0, baseline_m=0.11, duration_s=30.0, facing="forward",
         lever_arm_m=(0.065, -0.02, 0.01), mount_deg=(0.8, 1.4, -1.5),
         motion=HoverParams(
@@ -144,7 +148,7 @@ PRESETS: dict[str, PresetSpec] = {
         name="kitti-like",
         description="street with a ground plane and building facades, forward camera 1241x376 at 10 Hz, "
                     "0.54 m baseline, car at ~10 m/s with turns",
-        camera=CameraModel(1241, 376, 718.856, 718.856, 607.1928, 185.2157),
+        camera=_radtan(1241, 376, 718.856, 718.856, 607.1928, 185.2157),
         rate_hz=10.0, baseline_m=0.54, duration_s=60.0, facing="forward",
         lever_arm_m=(0.8, 0.32, 0.75), mount_deg=(0.3, -0.5, 0.2),
         motion=CarParams(), scene="kitti-like", sensor=SensorModel(exposure=1.0, vignetting=1.5),
@@ -153,7 +157,7 @@ PRESETS: dict[str, PresetSpec] = {
         name="kitti-highway",
         description="highway: the kitti-like rig at ~27 m/s (2.7 m per frame) on gentle curves (radius > 1 km), "
                     "a road plane and only far structures (35-90 m away)",
-        camera=CameraModel(1241, 376, 718.856, 718.856, 607.1928, 185.2157),
+        camera=_radtan(1241, 376, 718.856, 718.856, 607.1928, 185.2157),
         rate_hz=10.0, baseline_m=0.54, duration_s=30.0, facing="forward",
         lever_arm_m=(0.8, 0.32, 0.75), mount_deg=(0.3, -0.5, 0.2),
         motion=CarParams(speed=27.0, road_amp=40.0, road_wavelengths=(1800.0, 3000.0), surge_amp=1.5),
@@ -163,7 +167,7 @@ PRESETS: dict[str, PresetSpec] = {
 
 
 # ------------------------------------------------------------------------------------- rigs
-def build_rig(spec: PresetSpec, camera: CameraModel, baseline_m: float) -> RenderRig:
+def build_rig(spec: PresetSpec, camera: Intrinsics, baseline_m: float) -> RenderRig:
     """Left/right cameras on the body: cam0 at ``spec.lever_arm_m``, cam1 at +baseline along x_c0."""
     base = R_BC_DOWN if spec.facing == "down" else R_BC_FORWARD
     R_BC0 = small_rotation(*spec.mount_deg) @ base

@@ -19,7 +19,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from gevi_cli.simulate.camera import CameraModel
+from gevi_cli.camera import Intrinsics
+from gevi_cli.simulate.camera import pixel_rays
 from gevi_cli.simulate.scene import Plane, Scene
 
 _REMAP_COLS = 4096
@@ -65,17 +66,17 @@ class CameraRenderer:
         supersample: sub-samples per pixel along each axis (2 = 2x2).
     """
 
-    def __init__(self, camera: CameraModel, supersample: int = 2):
+    def __init__(self, camera: Intrinsics, supersample: int = 2):
         self.camera = camera
         self.s = int(supersample)
-        rays = camera.pixel_rays(self.s)
+        rays = pixel_rays(camera, self.s)
         self.shape_ss = rays.shape[:2]
         r = rays.reshape(-1, 3)
         self.rx = np.ascontiguousarray(r[:, 0], dtype=np.float32)
         self.ry = np.ascontiguousarray(r[:, 1], dtype=np.float32)
         self.rz = np.ascontiguousarray(r[:, 2], dtype=np.float32)
         # angular spacing of sub-samples (rad) for mip-level selection
-        self.delta = 1.0 / (np.sqrt(camera.fx * camera.fy) * self.s)
+        self.delta = 1.0 / (camera.f * self.s)
         # bounds of the field of view in normalized coordinates, for plane culling, and per sample
         # row / column, to restrict each plane to the block of samples its projection can cover
         xn = (r[:, 0] / r[:, 2]).reshape(self.shape_ss)

@@ -195,9 +195,10 @@ def _assert_same_as_euroc(seq, euroc):
     np.testing.assert_array_equal(seq.stamps_ns, stamps)
     assert seq.stamps_ns.dtype == np.int64
     # calibration: intrinsics/distortion equal, extrinsics equal to round-off of inv(inv(T_BS))
-    for mine, theirs in ((seq.calibration.cam0, ref.calibration.cam0), (seq.calibration.cam1, ref.calibration.cam1)):
-        assert mine == theirs
-        np.testing.assert_allclose(mine.T_B_C, theirs.T_B_C, rtol=0, atol=1e-12)
+    mine, theirs = seq.calibration, ref.calibration
+    assert (mine.cam0, mine.cam1) == (theirs.cam0, theirs.cam1)
+    for T_mine, T_theirs in ((mine.T_B_C0, theirs.T_B_C0), (mine.T_B_C1, theirs.T_B_C1)):
+        np.testing.assert_allclose(T_mine, T_theirs, rtol=0, atol=1e-12)
     # IMU: identical samples, bitwise
     imu, ref_imu = seq.imu, euroc["imu"]
     np.testing.assert_array_equal(imu.t_ns, ref_imu.t_ns)

@@ -12,8 +12,9 @@ import cv2
 import numpy as np
 import pytest
 
+from gevi_cli.camera import Intrinsics
 from gevi_cli.datasets import open_sequence
-from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
+from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.frontend.rectify import Rectifier
 from gevi_cli.geometry import invert_pose
 from support import shared_path
@@ -24,13 +25,12 @@ def _rig() -> StereoRig:
     T_C0_C1 = np.eye(4)
     T_C0_C1[:3, :3] = rot
     T_C0_C1[:3, 3] = [0.064, 0.001, -0.0005]
-    cam0 = PinholeCamera(848, 800, 284.468, 285.51, 424.355, 393.742, "equidistant", (0.0008, 0.031, -0.03, 0.005))
-    cam1 = PinholeCamera(848, 800, 283.999, 285.266, 417.246, 400.402, "equidistant",
-                         (-0.002, 0.039, -0.038, 0.007), T_B_C=T_C0_C1)
-    return StereoRig(cam0, cam1)
+    cam0 = Intrinsics(848, 800, 284.468, 285.51, 424.355, 393.742, "equidistant", (0.0008, 0.031, -0.03, 0.005))
+    cam1 = Intrinsics(848, 800, 283.999, 285.266, 417.246, 400.402, "equidistant", (-0.002, 0.039, -0.038, 0.007))
+    return StereoRig(cam0, cam1, np.eye(4), T_C0_C1)
 
 
-def _project(cam: PinholeCamera, X_C: np.ndarray) -> np.ndarray:
+def _project(cam: Intrinsics, X_C: np.ndarray) -> np.ndarray:
     uv, _ = cv2.fisheye.projectPoints(X_C.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), cam.K, cam.dist_coeffs)
     return uv.reshape(-1, 2)
 
@@ -116,8 +116,8 @@ def test_t265_fisheye_pairs_rectify_and_match_on_rows(t265):
     assert np.median(np.abs(dy_rect)) < 2.5
     # The offset is the calibration's, not the rectification's: the same rig with the right lens pitched
     # by 6 mrad (and nothing else changed) puts the matches on their rows to a median of 0.5 px.
-    T = seq.calibration.cam1.T_B_C.copy()
+    T = seq.calibration.T_B_C1.copy()
     T[:3, :3] = T[:3, :3] @ cv2.Rodrigues(np.array([0.006, 0.0, 0.0]))[0]
-    pitched = StereoRig(seq.calibration.cam0, replace(seq.calibration.cam1, T_B_C=T))
+    pitched = replace(seq.calibration, T_B_C1=T)
     dy_pitched, _ = _row_offsets(pitched, frames)
     assert np.median(np.abs(dy_pitched)) < 0.5

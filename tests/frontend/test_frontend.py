@@ -19,8 +19,9 @@ import cv2
 import numpy as np
 import pytest
 
+from gevi_cli.camera import Intrinsics
 from gevi_cli.datasets import open_sequence
-from gevi_cli.datasets.calibration import PinholeCamera, StereoRig
+from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.frontend.config import FrontendConfig
 from gevi_cli.frontend.derotate import apply_homography, fit_inplane
 from gevi_cli.frontend.grid import GridDetector, detect_grid
@@ -79,8 +80,8 @@ def test_lk_recovers_subpixel_translation():
 def _rectified_rig(h: int, w: int, f: float = 300.0) -> StereoRig:
     T_B_C1 = np.eye(4)
     T_B_C1[0, 3] = 0.1  # right camera 0.1 m along +x: already a rectified pair
-    return StereoRig(PinholeCamera(w, h, f, f, (w - 1) / 2, (h - 1) / 2),
-                     PinholeCamera(w, h, f, f, (w - 1) / 2, (h - 1) / 2, T_B_C=T_B_C1))
+    cam = Intrinsics(w, h, f, f, (w - 1) / 2, (h - 1) / 2)
+    return StereoRig(cam, cam, np.eye(4), T_B_C1)
 
 
 @pytest.mark.parametrize("deg", [4.0, -8.0])

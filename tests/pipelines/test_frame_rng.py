@@ -5,13 +5,14 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from gevi_cli.camera import Intrinsics
 from gevi_cli.observations import RectifiedStereo
 from gevi_cli.pipelines.config import OdometryConfig
 from gevi_cli.pipelines.odometry import KeyframeOdometry
 
 
 def _odometry(seed: int) -> KeyframeOdometry:
-    fe = SimpleNamespace(camera=RectifiedStereo(752, 480, 450.0, 450.0, 376.0, 240.0, 0.1))
+    fe = SimpleNamespace(camera=RectifiedStereo(Intrinsics(752, 480, 450.0, 450.0, 376.0, 240.0), 0.1))
     cfg = OdometryConfig()
     cfg.run.seed = seed
     return KeyframeOdometry(fe, cfg)

@@ -5,6 +5,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from gevi_cli.camera import Intrinsics
 from gevi_cli.geometry import exp_so3
 from gevi_cli.observations import RectifiedStereo
 from gevi_cli.pipelines.config import OdometryConfig
@@ -13,7 +14,7 @@ from gevi_cli.pipelines.types import BRIDGED, OK, FrameResult
 
 
 def _odometry(n_matches: int, n_inliers: int, status: str = OK) -> KeyframeOdometry:
-    fe = SimpleNamespace(camera=RectifiedStereo(752, 480, 450.0, 450.0, 376.0, 240.0, 0.1))
+    fe = SimpleNamespace(camera=RectifiedStereo(Intrinsics(752, 480, 450.0, 450.0, 376.0, 240.0), 0.1))
     odo = KeyframeOdometry(fe, OdometryConfig())
     R_pc = exp_so3(np.array([0.01, -0.02, 0.03]))  # pose of the current camera in the previous one
     odo.velocity = np.eye(4)

@@ -5,15 +5,16 @@ import cv2
 import numpy as np
 import pytest
 
+from gevi_cli.camera import Intrinsics
 from gevi_cli.geometry import make_T, small_rotation
 from gevi_cli.simulate import textures as tx
-from gevi_cli.simulate.camera import CameraModel
+from gevi_cli.simulate.camera import pixel_rays
 from gevi_cli.simulate.render import CameraRenderer, SensorModel
 from gevi_cli.simulate.scene import Scene, Texture, rect_plane
 
 ROWS, COLS, SQ_PX, TEXEL = 7, 9, 60, 0.001  # 6 cm squares
 BASELINE = 0.2
-CAM = CameraModel(640, 480, 500.0, 499.0, 322.3, 238.1, (-0.15, 0.03, 2e-4, -1e-4))
+CAM = Intrinsics(640, 480, 500.0, 499.0, 322.3, 238.1, "radtan", (-0.15, 0.03, 2e-4, -1e-4))
 NOISE_FREE = SensorModel(vignetting=0.0, noise=False)
 
 
@@ -85,8 +86,7 @@ def test_corners_on_projection_and_stereo_triangulation(pose):
     assert err0.max() < 0.1 and err1.max() < 0.1
 
     # stereo triangulation with the known rig (undistort, then linear triangulation)
-    x0 = np.stack(CAM.undistort_normalized((d0[:, 0] - CAM.cx) / CAM.fx, (d0[:, 1] - CAM.cy) / CAM.fy), axis=1)
-    x1 = np.stack(CAM.undistort_normalized((d1[:, 0] - CAM.cx) / CAM.fx, (d1[:, 1] - CAM.cy) / CAM.fy), axis=1)
+    x0, x1 = CAM.undistort_points(d0), CAM.undistort_points(d1)
     P0 = np.hstack([np.eye(3), np.zeros((3, 1))])
     P1 = np.hstack([np.eye(3), np.array([[-BASELINE], [0.0], [0.0]])])
     Xh = cv2.triangulatePoints(P0, P1, x0.T, x1.T)
@@ -97,7 +97,7 @@ def test_corners_on_projection_and_stereo_triangulation(pose):
 
 
 def test_rays_reproject_to_their_pixels():
-    rays = CAM.pixel_rays(2).reshape(-1, 3)
+    rays = pixel_rays(CAM, 2).reshape(-1, 3)
     uv = CAM.project(rays)
     s = 2
     u = (np.arange(CAM.width * s) + 0.5) / s - 0.5
@@ -109,12 +109,12 @@ def test_rays_reproject_to_their_pixels():
 
 def test_depth_is_exact_for_a_fronto_parallel_plane():
     """The ray-cast range equals the analytic distance to the plane for every pixel."""
-    cam = CameraModel(64, 48, 50.0, 50.0, 31.5, 23.5)
+    cam = Intrinsics(64, 48, 50.0, 50.0, 31.5, 23.5)
     tex = Texture.from_image(np.full((8, 8), 0.5, np.float32), 1.0)
     plane = rect_plane([-50, -50, 2.0], [1, 0, 0], [0, 1, 0], 100, 100, tex)
     r = CameraRenderer(cam, supersample=1)
     _, rng_m = r.radiance(Scene((plane,), water=__import__("gevi_cli.simulate.scene", fromlist=["Water"]).Water(blur_max=0.1)), np.eye(4))
-    rays = cam.pixel_rays(1)
+    rays = pixel_rays(cam, 1)
     np.testing.assert_allclose(rng_m, 2.0 / rays[..., 2], rtol=1e-6)
 
 
@@ -122,7 +122,7 @@ def test_depth_is_exact_for_a_fronto_parallel_plane():
 @pytest.mark.parametrize("depth", [0.3, 1.0, 2.0])
 def test_edges_are_exact(texel_count, depth):
     """The gradient centroid of a rendered step edge (exact for pixel-integrated edges) is the projection."""
-    cam = CameraModel(64, 48, 50.0, 50.0, 31.5, 23.5)
+    cam = Intrinsics(64, 48, 50.0, 50.0, 31.5, 23.5)
     img = np.zeros((40, texel_count), np.float32)
     img[:, texel_count // 2:] = 1.0
     tex = Texture.from_image(img, 0.01)
