@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from gevi_cli.evaluation.evaluate import EvalSettings, PairResult, evaluate_pair
+from gevi_cli.evaluation.evaluate import EvalSettings, PairResult
 from gevi_cli.trajectory import Trajectory
 
 __all__ = ["RunResult", "run", "evaluate"]
@@ -90,21 +90,20 @@ def run(sequence, method: str | None = None, config: str | None = None, sets=(),
 
 def evaluate(reference, estimate, align: str = "se3", delta: float = 1.0, unit: str = "frames",
              max_diff_s: float = 0.01, method: str = "estimate", sequence: str = "") -> PairResult:
-    """ATE and RPE of ``estimate`` against ``reference`` (Trajectory objects or trajectory files in any
-    format ``gevi eval`` reads), the library call under ``gevi eval``: stamps associated within
-    ``max_diff_s`` seconds, the estimate aligned by ``align`` (se3, sim3, posyaw, origin, none), RPE
-    over ``delta`` frames (``unit`` "frames") or metres ("m").  The PairResult holds ``ate``, ``rpe``,
-    ``alignment``, ``aligned`` and the ``association``; ``status`` "failed" with a ``reason`` when the
-    two cannot be compared."""
-    ref = _trajectory(reference, "body")
-    est = _trajectory(estimate, ref.frame)
-    settings = EvalSettings(align=align, max_diff_s=max_diff_s, rpe_delta=delta, rpe_unit=unit, min_coverage=0.0)
-    return evaluate_pair(ref, est, settings, align, method=method, sequence=sequence)
+    """ATE and RPE of ``estimate`` against ``reference``, the library call under ``gevi eval`` and
+    ``gevi run`` (:func:`gevi_cli.evaluation.pair.evaluate_estimate`): ``reference`` a Trajectory, a
+    trajectory file or a dataset folder (as ``gevi eval --gt``), ``estimate`` a Trajectory or a
+    trajectory file (as ``gevi eval -e``); stamps associated within ``max_diff_s`` seconds, the estimate
+    aligned by ``align`` (se3, sim3, posyaw, origin, none), RPE over ``delta`` frames (``unit``
+    "frames") or metres ("m").  The PairResult holds ``ate``, ``rpe``, ``kitti``, ``alignment``,
+    ``aligned`` and the ``association``; ``status`` "failed" with a ``reason`` when the two cannot be
+    compared (a file without poses: "no valid poses").  Raises :class:`gevi_cli.errors.GeviError` for
+    unusable input."""
+    from gevi_cli.evaluation.pair import evaluate_estimate, evaluate_file, groundtruth, read_groundtruth
 
-
-def _trajectory(x, frame: str) -> Trajectory:
-    if isinstance(x, Trajectory):
-        return x
-    from gevi_cli.trajectory import read_trajectory
-
-    return read_trajectory(Path(x), frame=frame)
+    settings = EvalSettings(align=align, max_diff_s=max_diff_s, rpe_delta=delta, rpe_unit=unit,
+                            min_coverage=0.0).checked()
+    ref = groundtruth(reference) if isinstance(reference, Trajectory) else read_groundtruth(reference)
+    if isinstance(estimate, Trajectory):
+        return evaluate_estimate(ref, estimate, settings, align, method=method, sequence=sequence)
+    return evaluate_file(ref, Path(estimate), settings, align, method=method, sequence=sequence)

@@ -45,3 +45,33 @@ def test_api_is_what_the_cli_writes(tmp_path, capsys):
     pair = evaluate(gt, tmp_path / "run" / "traj_body.tum", align="se3")
     assert pair.ate.trans_rmse == status["evaluation"]["ate_m"]
     assert abs(result.evaluation.ate.trans_rmse - status["evaluation"]["ate_m"]) < 1e-9
+
+
+def _written(metrics_json) -> dict:
+    """ATE and RPE (m, deg) of the one estimate of an eval folder's metrics.json."""
+    r = json.loads(metrics_json.read_text())["results"][0]
+    assert r["status"] == "ok", r["reason"]
+    return {k: r[part][k] for part in ("ate", "rpe") for k in ("trans_rmse", "rot_rmse_deg")}
+
+
+def _numbers(pair) -> dict:
+    return {k: getattr(getattr(pair, part), k) for part in ("ate", "rpe") for k in ("trans_rmse", "rot_rmse_deg")}
+
+
+def test_api_evaluate_is_what_gevi_eval_writes(tmp_path, capsys):
+    """evaluate() of a run folder's trajectory reads, bit for bit, the ATE and RPE that `gevi run` wrote into
+    RUN/eval (against the dataset's ground truth) and that `gevi eval` writes against the KITTI ground-truth
+    file (stamped with the run's times.txt): one library call under the API and both commands."""
+    from gevi_cli.api import evaluate
+
+    seq = shared_path("kitti06_head", "dataset", "sequences", "06")
+    poses = shared_path("kitti06_head", "dataset", "poses", "06.txt")
+    run = tmp_path / "run"
+    code, _, err = run_cli(["run", seq, "--method", "cfo", "--stride", "3", "-q", "-o", run], capsys)
+    assert code == 0, err
+    code, _, err = run_cli(["eval", "--gt", poses, "-e", f"cfo={run}", "--align", "se3", "--no-plots", "-q",
+                            "-o", tmp_path / "eval"], capsys)
+    assert code == 0, err
+    traj = run / "traj_body.tum"
+    assert _numbers(evaluate(seq, traj, align="se3")) == _written(run / "eval" / "metrics.json")
+    assert _numbers(evaluate(poses, traj, align="se3")) == _written(tmp_path / "eval" / "metrics.json")

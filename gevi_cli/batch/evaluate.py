@@ -30,15 +30,16 @@ class BatchResults:
 
 
 def _gt_loader():
-    from gevi_cli.evaluation.inputs import load_groundtruth
-    from gevi_cli.evaluation.kitti_devkit import raw_poses
+    """load(path) -> (ground truth, its cam0->body T_B_C0 or None, its raw KITTI rows or None), read once
+    per path as `gevi eval --gt` reads it."""
+    from gevi_cli.evaluation.pair import read_groundtruth
 
     cache = {}
 
     def load(path: str):
         if path not in cache:
-            gt, T = load_groundtruth(Path(path))
-            cache[path] = (gt, T, raw_poses(gt) if gt.indexed else None)
+            truth = read_groundtruth(path)
+            cache[path] = (truth.trajectory, truth.T_B_C0, truth.raw)
         return cache[path]
 
     return load

@@ -6,6 +6,7 @@ same frame.  Units: metres, degrees, seconds.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -42,6 +43,20 @@ class EvalSettings:
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
+
+    def checked(self) -> EvalSettings:
+        """These settings with ``min_coverage`` as a fraction (a value above 1 is percent); a one-line
+        GeviError naming the `gevi eval` option for a value out of range."""
+        min_coverage = self.min_coverage / 100.0 if self.min_coverage > 1.0 else self.min_coverage
+        if not 0.0 <= min_coverage <= 1.0:
+            raise GeviError("--min-coverage", f"must be a fraction 0..1 (or percent 0..100), got {min_coverage:g}")
+        if self.max_diff_s <= 0:
+            raise GeviError("--max-diff", f"must be positive (seconds), got {self.max_diff_s:g}")
+        if self.n_align == 0 or self.n_align < -1:
+            raise GeviError("--n-align", f"must be -1 (all poses) or a positive count, got {self.n_align}")
+        if self.rpe_delta <= 0:
+            raise GeviError("--rpe-delta", f"must be positive, got {self.rpe_delta:g}")
+        return dataclasses.replace(self, min_coverage=min_coverage)
 
 
 @dataclass

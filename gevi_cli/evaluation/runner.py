@@ -1,30 +1,15 @@
-"""The `gevi eval` pipeline: inputs -> per-estimate evaluation -> tables, eval folder, plots."""
+"""The `gevi eval` pipeline: inputs -> per-estimate evaluation (:mod:`gevi_cli.evaluation.pair`) -> tables,
+eval folder, plots."""
 from __future__ import annotations
 
 import sys
 import time
 from pathlib import Path
 
-from gevi_cli.errors import DataError, GeviError
+from gevi_cli.errors import GeviError
 from gevi_cli.evaluation import inputs as inp
-from gevi_cli.evaluation.evaluate import EvalSettings, evaluate_pair, failed
-
-
-def _settings(align, n_align, max_diff, t_offset, rpe_delta, rpe_unit, min_coverage, est_frame, kitti,
-              allow_jumps=False) -> EvalSettings:
-    if min_coverage > 1.0:
-        min_coverage = min_coverage / 100.0
-    if not 0.0 <= min_coverage <= 1.0:
-        raise GeviError("--min-coverage", f"must be a fraction 0..1 (or percent 0..100), got {min_coverage:g}")
-    if max_diff <= 0:
-        raise GeviError("--max-diff", f"must be positive (seconds), got {max_diff:g}")
-    if n_align == 0 or n_align < -1:
-        raise GeviError("--n-align", f"must be -1 (all poses) or a positive count, got {n_align}")
-    if rpe_delta <= 0:
-        raise GeviError("--rpe-delta", f"must be positive, got {rpe_delta:g}")
-    return EvalSettings(align=align, n_align=n_align, max_diff_s=max_diff, t_offset_s=t_offset,
-                        rpe_delta=rpe_delta, rpe_unit=rpe_unit, min_coverage=min_coverage, est_frame=est_frame,
-                        kitti=kitti, allow_jumps=allow_jumps)
+from gevi_cli.evaluation.evaluate import EvalSettings, failed
+from gevi_cli.evaluation.pair import GroundTruth, evaluate_file, read_groundtruth
 
 
 def collect_specs(gt_opts, estimates, results_root, gt_root, sequence_name):
@@ -85,43 +70,74 @@ def collect_specs(gt_opts, estimates, results_root, gt_root, sequence_name):
     return specs, seq_gt
 
 
-def _stamped_for_run(gt, gt_raw, est, est_path: Path, cache: dict, info: dict):
-    """(ground truth, its raw KITTI poses) to evaluate ``est`` with.
+def _only(specs, only_methods):
+    """The specs of the ``--method`` names (comma-separated, repeatable); all of them without."""
+    if not only_methods:
+        return specs
+    wanted = [m for item in only_methods for m in item.split(",") if m]
+    unknown = [m for m in wanted if m not in {s.method for s in specs}]
+    if unknown:
+        raise GeviError("--method", f"no method {', '.join(unknown)}; found {', '.join(sorted({s.method for s in specs}))}")
+    return [s for s in specs if s.method in wanted]
 
-    A KITTI ground truth has no stamps, a `gevi run` estimate has the sequence's: when the estimate is
-    the primary trajectory of a run folder of that KITTI sequence, the ground truth is stamped with the
-    sequence's ``times.txt`` (row i = frame i), the same stamps `gevi run` gives it without ``--gt``.
-    Anything else is returned unchanged (the association then explains a stamped/unstamped mix).
-    """
-    if not gt.indexed or est.indexed:
-        return gt, gt_raw
-    times = inp.run_sequence_times(Path(est_path).parent)
-    if times is None:
-        return gt, gt_raw
-    key = (id(gt), times)
-    if key not in cache:
-        cache[key] = inp.stamp_kitti_groundtruth(gt, times)
-        info.setdefault("stamped_from", []).append(str(times))
-    return cache[key], None
+
+def _label(method: str, sequence: str, trial: str = "") -> str:
+    return f"{method}/{sequence}" + (f"/{trial}" if trial else "")
+
+
+def _evaluate_spec(sp: inp.EstimateSpec, gt: GroundTruth, settings: EvalSettings, keep_going: bool, warn):
+    """(PairResult, why this alignment) of one estimate of the CLI (``--align auto``: from the run-folder hints)."""
+    if sp.path is None:
+        return failed(sp.method, sp.sequence, sp.trial, None, "missing"), ""
+    if settings.align == "auto":
+        align, why = inp.align_from_hint(sp.hint_dirs)
+        why = why.replace(str(Path(why.split(":")[0]).parent) + "/", "") if ":" in why else why
+    else:
+        align, why = settings.align, "--align"
+    r = evaluate_file(gt, sp.path, settings, align, method=sp.method, sequence=sp.sequence, trial=sp.trial,
+                      keep_going=keep_going, warn=warn)
+    return r, why
+
+
+def eval_inputs(gt: dict, estimates: dict, results_root=None, gt_root=None, t_b_c0=None, gt_frame="body") -> dict:
+    """The inputs ``settings.yaml`` records: ``gt`` {sequence: path}, ``estimates`` {label: path or None},
+    the other `gevi eval` options and the command line."""
+    return {"gt": {s: str(p) for s, p in gt.items()}, "results": results_root, "gt_root": gt_root,
+            "estimates": {label: str(p) if p else None for label, p in estimates.items()},
+            "T_B_C0": t_b_c0, "gt_frame": gt_frame, "command": " ".join(["gevi"] + sys.argv[1:])}
+
+
+def write_eval_folder(out_dir: Path, tables, results, gts: dict, settings: EvalSettings, inputs: dict,
+                      plots: bool) -> None:
+    """The eval folder (see :mod:`gevi_cli.evaluation.report`) of ``results`` against ``gts``
+    ({sequence: GroundTruth}), with the figures when ``plots``."""
+    from gevi_cli.evaluation.report import write_report
+
+    write_report(out_dir, tables, results, {s: g.info() for s, g in gts.items()}, settings, inputs)
+    if plots:
+        from gevi_cli.evaluation.plots import plot_sequence, plot_summary
+
+        pdir = out_dir / "plots"
+        for s, g in gts.items():
+            plot_sequence(pdir, s, g.trajectory, [r for r in results if r.sequence == s])
+        ate = next((t for t in tables if t.key == "ate_trans_rmse"), None)
+        if ate is not None:
+            plot_summary(pdir, ate)
 
 
 def run_eval(*, gt_opts, estimates, results_root, gt_root, sequence_name, align, n_align, max_diff, t_offset,
              rpe_delta, rpe_unit, min_coverage, est_frame, gt_frame, t_b_c0, kitti, plots, out, overwrite,
              keep_going, quiet, only_methods=(), echo=print, allow_jumps=False):
+    """`gevi eval`: collect the estimates and ground truths of the options, evaluate each
+    (:func:`evaluate_file`), print the tables and write the eval folder; (results, tables, folder)."""
     t_start = time.perf_counter()
-    settings = _settings(align, n_align, max_diff, t_offset, rpe_delta, rpe_unit, min_coverage, est_frame, kitti,
-                         allow_jumps)
+    settings = EvalSettings(align=align, n_align=n_align, max_diff_s=max_diff, t_offset_s=t_offset,
+                            rpe_delta=rpe_delta, rpe_unit=rpe_unit, min_coverage=min_coverage, est_frame=est_frame,
+                            kitti=kitti, allow_jumps=allow_jumps).checked()
     specs, seq_gt = collect_specs(gt_opts, estimates, results_root, gt_root, sequence_name)
-    if only_methods:
-        wanted = [m for item in only_methods for m in item.split(",") if m]
-        unknown = [m for m in wanted if m not in {s.method for s in specs}]
-        if unknown:
-            raise GeviError("--method", f"no method {', '.join(unknown)}; found {', '.join(sorted({s.method for s in specs}))}")
-        specs = [s for s in specs if s.method in wanted]
-    from gevi_cli.evaluation.kitti_devkit import raw_poses
-    from gevi_cli.evaluation.report import build_tables, choose_out_dir, default_name, write_report
+    specs = _only(specs, only_methods)
+    from gevi_cli.evaluation.report import build_tables, choose_out_dir, default_name
     from gevi_cli.evaluation.tables import render_markdown
-    from gevi_cli.trajectory import read_trajectory
 
     T_override = inp.load_T_B_C0(Path(t_b_c0)) if t_b_c0 else None
     methods = list(dict.fromkeys(s.method for s in specs))
@@ -131,51 +147,26 @@ def run_eval(*, gt_opts, estimates, results_root, gt_root, sequence_name, align,
     def warn(msg):
         echo(f"gevi: warning: {msg}", err=True) if echo is not print else print(f"gevi: warning: {msg}", file=sys.stderr)
 
-    gts, seq_info = {}, {}
+    gts = {}
     for seq in sequences:
-        gt, T = inp.load_groundtruth(seq_gt[seq], gt_frame, allow_jumps)
-        T = T_override if T_override is not None else T
-        gts[seq] = (gt, T, raw_poses(gt) if gt.indexed else None)
-        seq_info[seq] = {"groundtruth": str(seq_gt[seq]), "poses": len(gt), "frame": gt.frame,
-                         "indexed": gt.indexed, "span_s": gt.duration_s, "path_length_m": gt.path_length_m}
-        for w in gt.meta.get("warnings", []):
+        gts[seq] = read_groundtruth(seq_gt[seq], gt_frame, allow_jumps, T_override)
+        for w in gts[seq].trajectory.meta.get("warnings", []):
             warn(w)
 
-    results, stamped = [], {}
+    results = []
     for sp in specs:
-        label = f"{sp.method}/{sp.sequence}" + (f"/{sp.trial}" if sp.trial else "")
+        r, why = _evaluate_spec(sp, gts[sp.sequence], settings, keep_going, warn)
+        results.append(r)
+        label = _label(sp.method, sp.sequence, sp.trial)
         if sp.path is None:
-            results.append(failed(sp.method, sp.sequence, sp.trial, None, "missing"))
             if not quiet:
                 echo(f"{label}: failed (no trajectory file)")
             continue
-        gt, T, gt_raw = gts[sp.sequence]
-        if settings.align == "auto":
-            method, why = inp.align_from_hint(sp.hint_dirs)
-            why = why.replace(str(Path(why.split(":")[0]).parent) + "/", "") if ":" in why else why
-        else:
-            method, why = settings.align, "--align"
-        try:
-            est = read_trajectory(sp.path, name=sp.method, allow_jumps=allow_jumps)
-            pair_gt, pair_raw = _stamped_for_run(gt, gt_raw, est, sp.path, stamped, seq_info[sp.sequence])
-            r = evaluate_pair(pair_gt, est, settings, method, method=sp.method, sequence=sp.sequence, trial=sp.trial,
-                              T_B_C0=T, gt_raw=pair_raw)
-        except DataError as exc:
-            if exc.message.startswith("contains no pose rows"):
-                r = failed(sp.method, sp.sequence, sp.trial, sp.path, "no valid poses")
-            elif keep_going:
-                warn(exc.one_line())
-                r = failed(sp.method, sp.sequence, sp.trial, sp.path, exc.one_line())
-            else:
-                raise
-        results.append(r)
         for w in r.warnings:
             warn(w)
         if not quiet:
-            if r.association is not None:
-                line = f"{label}: {r.association.summary()}; align {r.align} ({why})"
-            else:
-                line = f"{label}:"
+            line = f"{label}: {r.association.summary()}; align {r.align} ({why})" if r.association is not None \
+                else f"{label}:"
             if not r.ok:
                 line += f"; FAILED: {r.reason}"
             echo(line)
@@ -194,19 +185,8 @@ def run_eval(*, gt_opts, estimates, results_root, gt_root, sequence_name, align,
         echo(render_markdown(t, console=True))
     if notice:
         echo(notice)
-    inputs = {"gt": {s: str(p) for s, p in seq_gt.items()}, "results": results_root, "gt_root": gt_root,
-              "estimates": {f"{s.method}/{s.sequence}" + (f"/{s.trial}" if s.trial else ""): str(s.path) if s.path else None
-                            for s in specs},
-              "T_B_C0": t_b_c0, "gt_frame": gt_frame, "command": " ".join(["gevi"] + sys.argv[1:])}
-    write_report(out_dir, tables, results, seq_info, settings, inputs)
-    if plots:
-        from gevi_cli.evaluation.plots import plot_sequence, plot_summary
-
-        pdir = out_dir / "plots"
-        for s in sequences:
-            plot_sequence(pdir, s, gts[s][0], [r for r in results if r.sequence == s])
-        ate = next((t for t in tables if t.key == "ate_trans_rmse"), None)
-        if ate is not None:
-            plot_summary(pdir, ate)
+    inputs = eval_inputs(seq_gt, {_label(s.method, s.sequence, s.trial): s.path for s in specs}, results_root,
+                         gt_root, t_b_c0, gt_frame)
+    write_eval_folder(out_dir, tables, results, gts, settings, inputs, plots)
     echo(f"wrote {out_dir} ({time.perf_counter() - t_start:.1f} s)")
     return results, tables, out_dir

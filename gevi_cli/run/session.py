@@ -1,5 +1,6 @@
 """One `gevi run`: resolve the configuration, open the input, build front end + odometry, drive the
-run into its folder, evaluate it with the code of `gevi eval`, and print the result.
+run into its folder, evaluate it with the library call of `gevi eval` (``evaluation.pair``), and print
+the result.
 
 Configuration precedence (later wins): dataclass defaults -> ``gevi_cli/configs/<kind>.yaml`` -> ``--config``
 -> ``--set`` -> the shortcut options (``--pnp``, ``--no-ba``, ``--seed``).
@@ -364,30 +365,40 @@ def execute(req: RunRequest, echo=print) -> int:
 
 
 def _evaluate(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status, echo):
-    """`gevi eval --gt GT -e METHOD=RUN/traj_body.tum` into RUN/eval (the same code path).
+    """The run's primary trajectory against the ground truth ``gt`` (a file or the dataset folder) into
+    RUN/eval, with the library call of `gevi eval` (:mod:`gevi_cli.evaluation.pair`).
 
     The config's alignment (SE(3): what every comparison across methods uses) is primary; a
     stereo-inertial run adds posyaw (4-DOF, gravity known) beside it in RUN/eval/posyaw.
     Returns the primary alignment's PairResult (None when the evaluation failed).
     """
+    from gevi_cli.evaluation.pair import read_groundtruth
+
     aligns = [cfg.run.align] + (["posyaw"] if req.method == "gevi" and cfg.run.align != "posyaw" else [])
+    try:
+        truth, problem = read_groundtruth(gt), None
+    except GeviError as err:  # the run is complete on disk; an unusable ground truth must not hide it
+        truth, problem = None, err.one_line()
     status.evaluation = {}
     for k, align in enumerate(aligns):
         out = run_dir / "eval" if k == 0 else run_dir / "eval" / align
-        ev, result = _evaluate_one(run_dir, req, cfg, gt, seq_name, status, align, out, echo)
+        if truth is None:
+            ev, result = _failed(problem, echo)
+        else:
+            ev, result = _evaluate_one(run_dir, req, cfg, truth, seq_name, status, align, out, echo)
         if k == 0:
             status.evaluation.update(ev)
             primary = result
         else:
             status.evaluation[align] = ev
     if req.method == "gevi":
-        _evaluate_tilt(run_dir, gt, status, echo)
+        _evaluate_tilt(run_dir, truth, status, echo, problem)
     return primary
 
 
-def _evaluate_tilt(run_dir: Path, gt, status, echo) -> None:
-    """Roll/pitch error of the body trajectory against a gravity-aligned ground truth (no alignment)."""
-    from gevi_cli.evaluation.inputs import load_groundtruth
+def _evaluate_tilt(run_dir: Path, truth, status, echo, problem: str | None = None) -> None:
+    """Roll/pitch error of the body trajectory against ``truth``, a gravity-aligned ground truth (no
+    alignment); ``problem``: why the ground truth could not be read (then ``truth`` is None)."""
     from gevi_cli.evaluation.tilt import tilt_errors
     from gevi_cli.trajectory import read_trajectory
 
@@ -396,9 +407,11 @@ def _evaluate_tilt(run_dir: Path, gt, status, echo) -> None:
         echo("roll/pitch not evaluated: the run ended before the stereo-IMU initialisation (its world is the "
              "first camera frame, not gravity-aligned)")
         return
+    if problem is not None:
+        echo(f"roll/pitch not evaluated: {problem}")
+        return
     try:
-        gt_traj, _ = load_groundtruth(Path(gt))
-        te = tilt_errors(read_trajectory(run_dir / status.primary, frame="body"), gt_traj)
+        te = tilt_errors(read_trajectory(run_dir / status.primary, frame="body"), truth.trajectory)
     except GeviError as err:
         echo(f"roll/pitch not evaluated: {err.one_line()}")
         return
@@ -415,26 +428,32 @@ def _evaluate_tilt(run_dir: Path, gt, status, echo) -> None:
          "direction, no alignment; needs a gravity-aligned ground truth)")
 
 
-def _evaluate_one(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status, align: str, out: Path, echo):
-    """(the status.json evaluation entries, the PairResult or None when it failed)."""
-    from gevi_cli.evaluation.runner import run_eval
+def _failed(why: str, echo):
+    echo(f"evaluation failed: {why}")
+    return {"failed": why}, None
 
+
+def _evaluate_one(run_dir: Path, req: RunRequest, cfg, truth, seq_name: str, status, align: str, out: Path, echo):
+    """(the status.json evaluation entries, the PairResult or None when it failed) of the run's primary
+    trajectory against ``truth`` (a GroundTruth) aligned by ``align``, with its eval folder ``out``."""
+    from gevi_cli.evaluation.evaluate import EvalSettings
+    from gevi_cli.evaluation.pair import evaluate_file
+    from gevi_cli.evaluation.report import build_tables
+    from gevi_cli.evaluation.runner import eval_inputs, write_eval_folder
+
+    est = run_dir / status.primary
     try:
-        results, tables, _ = run_eval(
-            gt_opts=[str(gt)], estimates=[f"{req.method}={run_dir / status.primary}"], results_root=None, gt_root=None,
-            sequence_name=seq_name, align=align, n_align=-1, max_diff=0.01, t_offset=0.0,
-            rpe_delta=cfg.run.rpe_delta, rpe_unit="frames", min_coverage=0.0, est_frame="same", gt_frame="body",
-            t_b_c0=None, kitti=True, plots=req.plots, out=str(out), overwrite=True, keep_going=True,
-            quiet=True, echo=lambda *a, **k: None)  # the run prints its own one-line summary
+        settings = EvalSettings(align=align, rpe_delta=cfg.run.rpe_delta, min_coverage=0.0).checked()
+        r = evaluate_file(truth, est, settings, align, method=req.method, sequence=seq_name, keep_going=True)
+        tables = build_tables([r], [req.method], [seq_name], settings)
+        inputs = eval_inputs({seq_name: truth.path}, {f"{req.method}/{seq_name}": est})
+        write_eval_folder(out, tables, [r], {seq_name: truth}, settings, inputs, req.plots)
     except GeviError as err:  # the run is complete on disk; an unusable evaluation must not hide it
-        echo(f"evaluation failed: {err.one_line()}")
-        return {"failed": err.one_line()}, None
-    r = results[0]
+        return _failed(err.one_line(), echo)
     for w in r.warnings:
         echo(f"gevi: warning: {w}", err=True)
     if not (r.ok and r.ate is not None):
-        echo(f"evaluation failed: {r.reason}")
-        return {"failed": r.reason}, None
+        return _failed(r.reason, echo)
     rpe = r.rpe.trans_rmse if r.rpe is not None else float("nan")
     echo(f"ATE {_metres(r.ate.trans_rmse)}, RPE {_metres(rpe)} ({r.align.upper()}, body frame, RPE over "
          f"{cfg.run.rpe_delta:g} frame; {r.association.summary()})")

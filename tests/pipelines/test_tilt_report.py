@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from gevi_cli.evaluation.pair import read_groundtruth
 from gevi_cli.geometry import exp_so3
 from gevi_cli.run.folder import RunStatus
 from gevi_cli.run.session import _evaluate_tilt
@@ -25,7 +26,7 @@ def _run(tmp_path, drift_deg_per_min, duration_s=60.0, init_s=2.0):
     write_trajectory(Trajectory.from_rotations(t_ns, R_est, pos, frame="body"), tmp_path / "traj_body.tum", "tum")
     st = RunStatus(primary="traj_body.tum", imu={"initialised": True, "initialisation": {"at_s": init_s}})
     lines = []
-    _evaluate_tilt(tmp_path, tmp_path / "gt.tum", st, lambda *a, **k: lines.append(" ".join(map(str, a))))
+    _evaluate_tilt(tmp_path, read_groundtruth(tmp_path / "gt.tum"), st, lambda *a, **k: lines.append(" ".join(map(str, a))))
     return st.evaluation, lines
 
 
