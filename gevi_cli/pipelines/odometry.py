@@ -241,8 +241,7 @@ class KeyframeOdometry:
         pc = self.kf.p @ T_ck[:3, :3].T + T_ck[:3, 3]
         front = pc[:, 2] > self.cfg.triangulation.min_depth_m
         xy = pc[front, :2] / pc[front, 2:]
-        c = self.camera
-        uv = np.column_stack([c.fx * xy[:, 0] + c.cx, c.fy * xy[:, 1] + c.cy])
+        uv = self.camera.intrinsics.pixels(xy)
         z_prev = self.kf.p[front] @ T_pk[2, :3] + T_pk[2, 3]
         return Prediction(self.kf.ids[front], uv, np.where(z_prev > 0, z_prev / pc[front, 2], 1.0))
 
