@@ -34,10 +34,6 @@ class TiltErrors:
         """RMS over roll and pitch differences (amplified near pitch +-90 deg, where roll is ill-defined)."""
         return float(np.sqrt(np.mean(self.roll_pitch_deg ** 2)))
 
-    def window_rmse_deg(self, t0_ns: int, t1_ns: int) -> float:
-        m = (self.t_ns >= t0_ns) & (self.t_ns <= t1_ns)
-        return float(np.sqrt(np.mean(self.err_deg[m] ** 2))) if m.any() else float("nan")
-
     def trend_deg_per_min(self, t0_ns: int, window_s: float = 5.0) -> float:
         """Slope (deg per minute) of the tilt error's RMSE over consecutive ``window_s`` windows from ``t0_ns``
         on, by least squares: whether roll/pitch drift over the run (> 0) or settle (< 0).  Every window
