@@ -126,3 +126,38 @@ class AccBiasTracker:
         J = np.hstack([np.eye(3), np.eye(3) * tau[-1]])
         std = float(np.sqrt(max(np.trace(P @ J @ C[6:, 6:] @ J.T @ P), 0.0) / 2.0)) * GRAVITY
         return b, std
+
+
+class InFlightBias:
+    """The horizontal accelerometer bias in flight [PROPOSAL]: each visually tracked frame's window
+    gravity into ``tracker`` (None: off), chained by the gyro to the frame before when that one is in it
+    too; at keyframes the estimate is adopted when its posterior std is below ``max_std`` (m/s^2).
+
+    ``std``: the last estimate's posterior std (NaN: none yet); ``updates``: seconds since the first
+    frame of each adoption."""
+
+    def __init__(self, tracker: AccBiasTracker | None, max_std: float):
+        self.tracker, self.max_std = tracker, max_std
+        self.std = float("nan")
+        self.updates: list[float] = []
+
+    def observe(self, t_ns: int, up: np.ndarray | None, rotvec: np.ndarray, t_prev_ns: int | None, keyframe: bool,
+                b_a: np.ndarray, since_start_s: float) -> np.ndarray:
+        """A frame at ``t_ns`` with its window gravity ``up`` (body, None: not tracked or none) and the
+        gyro rotation ``rotvec`` since the frame at ``t_prev_ns``; returns the bias to use from now on."""
+        bt = self.tracker
+        if up is None:
+            bt.reset()
+            return b_a
+        chained = len(bt) and t_prev_ns is not None and int(bt.t[-1]) == t_prev_ns
+        bt.add(t_ns, rotvec if chained else None, up, b_a)
+        if not keyframe:
+            return b_a
+        sol = bt.solve(b_a)
+        if sol is None:
+            return b_a
+        b, self.std = sol
+        if self.std < self.max_std:
+            self.updates.append(since_start_s)
+            return b
+        return b_a

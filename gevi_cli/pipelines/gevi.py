@@ -23,7 +23,7 @@ the 6-DOF visual step and the interval is reported.
 The parts, each with one job: :class:`~.inertial_init.Initialisation` (the start and the standstill),
 :class:`~.inertial_state.ImuBiases` (the bias estimates), :class:`~.body_motion.BodyMotion` (per-frame
 IMU summaries, recent motion, window gravity, IMU propagation), :class:`~.tilt_window.TiltWindow` (the
-roll/pitch state and the BCD), :class:`~.acc_bias.AccBiasTracker` (the horizontal b_a in flight) and
+roll/pitch state and the BCD), :class:`~.acc_bias.InFlightBias` (the horizontal b_a in flight) and
 the two verifications.  Each frame's plan (:class:`FramePlan`) is decided from the IMU before the images.
 
 Frames: ``T_w_c`` is rectified cam0 in W; the body frame B is the IMU frame; ``R_ic`` = R_BC0 maps
@@ -42,7 +42,7 @@ from gevi_cli.geometry import make_T
 from gevi_cli.inertial.attitude import AttitudeFilterConfig, GravityAttitudeFilter, run_filter
 from gevi_cli.inertial.imu_stream import ImuStream
 from gevi_cli.inertial.standstill import GRAVITY
-from gevi_cli.pipelines.acc_bias import AccBiasTracker
+from gevi_cli.pipelines.acc_bias import AccBiasTracker, InFlightBias
 from gevi_cli.pipelines.body_motion import BodyMotion
 from gevi_cli.pipelines.config import OdometryConfig
 from gevi_cli.pipelines.inertial_init import Initialisation, Start
@@ -94,11 +94,9 @@ class GeviOdometry(KeyframeOdometry):
         self.body = BodyMotion(imu, self.biases, T_B_C, frame_period_s, cfg.fusion)
         self.tilts = TiltWindow(cfg, imu.noise, frame_period_s, self.R_ic)
         # the horizontal accelerometer bias from yaw changes (acc_bias.py); it reads the window gravity
-        self.bias_track = AccBiasTracker(cfg.fusion.bias_window_s, cfg.init.ba_prior_sigma,
-                                         walk=imu.noise.acc_random_walk) \
+        tracker = AccBiasTracker(cfg.fusion.bias_window_s, cfg.init.ba_prior_sigma, walk=imu.noise.acc_random_walk) \
             if cfg.fusion.bias_window_s > 0 and self.body.gravity is not None else None
-        self.bias_std = float("nan")  # posterior std of the in-flight horizontal b_a estimate (m/s^2)
-        self.bias_updates: list[float] = []  # seconds since the first frame of each in-flight b_a adoption
+        self.in_flight = InFlightBias(tracker, cfg.fusion.bias_max_std)
         self.six_verify = FivePointL1Verification(dataclasses.replace(cfg.verify, ransac="5pt"), self.camera)
         if cfg.verify.ransac == "3pt":
             self.gevi_verify = ThreePointVerification(cfg.verify, self.camera, self._levelling)
@@ -330,29 +328,13 @@ class GeviOdometry(KeyframeOdometry):
 
     # ------------------------------------------------------------------------------ biases
     def _track_acc_bias(self, res) -> None:
-        """The horizontal accelerometer bias in flight (acc_bias.py): each visually tracked frame's window
-        gravity into the tracker, chained by the gyro to the frame before when that one is in it too;
-        at keyframes the estimate is adopted when its posterior std is below ``fusion.bias_max_std``
-        [PROPOSAL]."""
-        bt, wg = self.bias_track, self.body.gravity
-        if bt is None or self.start.still:
+        """The horizontal accelerometer bias in flight (acc_bias.py), from the visually tracked frames in motion."""
+        if self.in_flight.tracker is None or self.start.still:
             return
+        wg = self.body.gravity
         up = wg.up(res.t_ns) if res.status == OK and len(wg) else None
-        if up is None:
-            bt.reset()
-            return
-        chained = len(bt) and self.t_prev is not None and int(bt.t[-1]) == self.t_prev
-        bt.add(res.t_ns, self.plan.sample.rotvec if chained else None, up, self.biases.b_a)
-        if not res.keyframe:
-            return
-        sol = bt.solve(self.biases.b_a)
-        if sol is None:
-            return
-        b, std = sol
-        self.bias_std = std
-        if std < self.cfg.fusion.bias_max_std:
-            self.biases.b_a = b
-            self.bias_updates.append((res.t_ns - self.start.t_first) * 1e-9)
+        self.biases.b_a = self.in_flight.observe(res.t_ns, up, self.plan.sample.rotvec, self.t_prev, res.keyframe,
+                                                 self.biases.b_a, (res.t_ns - self.start.t_first) * 1e-9)
 
     def _note_gap(self, res, gap: bool) -> None:
         if not gap:
@@ -376,15 +358,16 @@ class GeviOdometry(KeyframeOdometry):
         tilt_std = float(np.sqrt(np.trace(tw.tilt_cov) / 2)) if np.all(np.isfinite(tw.tilt_cov)) else np.nan
         return {"index": res.index, "t_ns": res.t_ns, "phase": phase, "roll": float(tw.tilt[0]),
                 "pitch": float(tw.tilt[1]), "yaw": yaw_of(R_wi), "bgx": b_g[0], "bgy": b_g[1],
-                "bgz": b_g[2], "bax": b_a[0], "bay": b_a[1], "baz": b_a[2], "ba_std": self.bias_std,
+                "bgz": b_g[2], "bax": b_a[0], "bay": b_a[1], "baz": b_a[2], "ba_std": self.in_flight.std,
                 "sigma_trace": float(np.trace(S)), "s_xx": S[0, 0], "s_yy": S[1, 1], "s_zz": S[2, 2], "s_xy": S[0, 1],
                 "s_xz": S[0, 2], "s_yz": S[1, 2], "tilt_std": tilt_std,
                 "ransac_iters": self.gevi_verify.iterations if mode == GEVI else 0}
 
     def summary(self) -> dict:
         """What status.json records about the IMU side of the run."""
-        flight = {"updates": len(self.bias_updates), "first_at_s": self.bias_updates[0] if self.bias_updates else None,
-                  "last_std": None if np.isnan(self.bias_std) else self.bias_std}
+        fl = self.in_flight
+        flight = {"updates": len(fl.updates), "first_at_s": fl.updates[0] if fl.updates else None,
+                  "last_std": None if np.isnan(fl.std) else fl.std}
         return {"initialisation": self.start.info, "gyro_bias": self.biases.b_g.tolist(),
                 "acc_bias": self.biases.b_a.tolist(), "acc_bias_in_flight": flight,
                 "imu_gaps": self.gaps, "initialised": self.start.done}

@@ -21,23 +21,12 @@ import numpy as np
 
 from gevi_cli import estimators as est
 from gevi_cli.frontend import FrontEnd, Prediction
-from gevi_cli.geometry import invert_pose, make_T, orthonormal_pose
+from gevi_cli.geometry import invert_pose, orthonormal_pose
 from gevi_cli.pipelines.config import OdometryConfig
 from gevi_cli.pipelines.keyframe import Keyframe, make_keyframe
-from gevi_cli.pipelines.pose6 import reprojection_median_px
+from gevi_cli.pipelines.local_ba import WindowFrame, window_ba
 from gevi_cli.pipelines.types import BRIDGED, OK, FrameResult
 from gevi_cli.pipelines.verification import TrackingFailure
-
-
-@dataclass
-class WindowFrame:
-    """A frame tracked against the current keyframe: left observations and ``T_kc`` (frame in KF)."""
-
-    index: int
-    t_ns: int
-    left: est.ImageObs
-    T_kc: np.ndarray
-    ok: bool
 
 
 @dataclass
@@ -54,20 +43,6 @@ class Matches:
     def subset(self, sel) -> "Matches":
         """The matches picked by ``sel`` (a mask or indices), every array alike."""
         return Matches(self.ids[sel], self.z[sel], self.y[sel], self.q[sel], self.p[sel], self.cov_unit[sel])
-
-
-def _thin_features(obs: list, cap: int) -> list:
-    """Keep at most ``cap`` feature ids in the window (evenly over the sorted ids: deterministic and
-    spread over detection time, so over the image); every image keeps its observations of those."""
-    ids = np.unique(np.concatenate([o.ids for o in obs]))
-    if len(ids) <= cap:
-        return obs
-    keep = ids[np.linspace(0, len(ids) - 1, cap).round().astype(np.int64)]
-    out = []
-    for o in obs:
-        m = np.isin(o.ids, keep, assume_unique=True)
-        out.append(est.ImageObs(o.ids[m], o.xy[m]))
-    return out
 
 
 class KeyframeOdometry:
@@ -379,42 +354,16 @@ class KeyframeOdometry:
         self.window = []
 
     def _local_ba(self, new: Keyframe) -> np.ndarray | None:
-        """Spec 10 over (current KF, window frames, ``new``); updates pending poses; new T_w_k or None."""
+        """Spec 10 over (current KF, window frames, ``new``) when every window frame was tracked; updates
+        the pending poses; the new keyframe's refined ``T_w_k`` or None (not run, failed, or not kept)."""
         kf, frames = self.kf, self.window
         if not frames or not all(f.ok for f in frames) or frames[-1].index != new.index:
             return None
-        T_k = np.array([f.T_kc for f in frames])  # T_K1_Fk, last = the new keyframe
-        obs = [kf.stereo_left, kf.stereo_right] + [f.left for f in frames[:-1]] + [new.stereo_left, new.stereo_right]
-        cap = self.cfg.ba.max_features
-        if cap:
-            obs = _thin_features(obs, cap)
-        window = est.BAWindow(obs[0], obs[1], obs[2:-2], obs[-2], obs[-1], T_k[:, :3, :3], T_k[:, :3, 3],
-                              self.camera.R_rl, self.camera.t_rl, sigma=float(np.sqrt(self.sigma2)))
         self._ba_longest = max(self._ba_longest, len(frames))
-        try:
-            r = est.epipolar_local_ba(window, est.BAOptions(kernel=self.cfg.ba.kernel, max_iter=self.cfg.ba.max_iter,
-                                                           delta=self.cfg.ba.delta_sigmas * window.sigma,
-                                                           tol=self.cfg.ba.tol, max_gap=self.cfg.ba.max_gap))
-        except est.EstimatorError:
+        out = window_ba(kf, frames, new, self.camera, float(np.sqrt(self.sigma2)), self.cfg.ba, self._last)
+        self.ba_rejected += int(out.rejected)
+        if out.T_k1_f is None:
             return None
-        t_track, t_ba = T_k[-1, :3, 3], r.t[-1]
-        span = np.linalg.norm(t_track)
-        if (not np.all(np.isfinite(r.t)) or r.rms_final > r.rms_initial * 1.5
-                or np.linalg.norm(t_ba - t_track) > self.cfg.ba.max_step_ratio * span + 0.05):
-            return None
-        if self.cfg.ba.max_reproj_ratio > 0 and self._last is not None:
-            # Cross-check with the tracking cost: the BA (epipolar distances) must not make the keyframe
-            # points reproject much worse in the new keyframe than the PnP pose did.  Windows whose
-            # tracks are dominated by LK errors (fast motion blur) otherwise pull the poses off.
-            p, q = self._last
-            f = self.camera.f
-            T_ck_ba = invert_pose(make_T(r.R[-1], r.t[-1]))
-            T_ck_tr = invert_pose(T_k[-1])
-            e_ba = reprojection_median_px(T_ck_ba[:3, :3], T_ck_ba[:3, 3], p, q, f)
-            e_tr = reprojection_median_px(T_ck_tr[:3, :3], T_ck_tr[:3, 3], p, q, f)
-            if e_ba > self.cfg.ba.max_reproj_ratio * e_tr + 0.05:
-                self.ba_rejected += 1
-                return None
-        refined = {f.index: kf.T_w_k @ make_T(r.R[i], r.t[i]) for i, f in enumerate(frames)}
+        refined = {i: kf.T_w_k @ T for i, T in out.T_k1_f.items()}
         self.pending = [(i, refined.get(i, T)) for i, T in self.pending]
         return refined[new.index]
