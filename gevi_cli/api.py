@@ -80,7 +80,7 @@ def run(sequence, method: str | None = None, config: str | None = None, sets=(),
     states = pd.DataFrame(memory.state_rows) if memory.state_rows else None
     online = memory.online_trajectory()
     est = memory.trajectory("body")
-    gt = getattr(source, "groundtruth", None)
+    gt = source.groundtruth
     pair = None
     if gt is not None and len(est):
         pair = evaluate(gt, est, align=cfg.run.align, delta=cfg.run.rpe_delta, method=method, sequence=source.name)

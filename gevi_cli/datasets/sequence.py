@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import abc
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Iterator
 
 import numpy as np
@@ -82,6 +83,10 @@ class Sequence(abc.ABC):
     kind: str = ""
     #: camera-IMU time shift from the calibration (Kalibr ``timeshift_cam_imu``: t_imu = t_cam + shift), s
     imu_time_offset_s: float = 0.0
+    #: the calibration file the camera model came from when it is not part of the dataset (a bag's --calib)
+    calibration_file: Path | None = None
+    #: the dataset folder or file the reader opened (readers set it in ``__init__``)
+    path: Path
 
     def __init__(self):
         self.warnings: list[str] = []

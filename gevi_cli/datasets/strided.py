@@ -30,9 +30,12 @@ def stride_suffix(stride: int) -> str:
 class StridedSequence(Sequence):
     """Frames ``0, K, 2K, ...`` of ``inner`` (see module docstring); named ``<inner name>_stride<K>``.
 
-    Attributes a reader adds beyond :class:`Sequence` (``path``, ``calibration_file``, ...) are the
+    Its ``path``, ``calibration_file`` and the attributes a reader adds beyond :class:`Sequence` are the
     inner sequence's.
     """
+
+    path = property(lambda self: self.inner.path)
+    calibration_file = property(lambda self: self.inner.calibration_file)
 
     def __init__(self, inner: Sequence, stride: int):
         super().__init__()

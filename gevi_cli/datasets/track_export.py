@@ -238,6 +238,7 @@ class TrackExport:
         t0 = time.perf_counter()
         self.path = Path(path)
         self.warnings: list[str] = []
+        self.imu_time_offset_s = 0.0  # no IMU
         if not self.path.is_dir():
             raise GeviError(self.path, "no such folder (expected an OV2SLAM track export folder)")
         tracks = sorted(p for p in self.path.glob(TRACKS_GLOB) if p.is_file())
@@ -251,7 +252,7 @@ class TrackExport:
         if not self.stereo_path.is_file():
             raise LayoutError(self.path, f"missing {STEREO_NAME} (the keyframe stereo matches of an OV2SLAM export)")
         self.name = self.path.resolve().name
-        self.calib_path = Path(calib)
+        self.calib_path = self.calibration_file = Path(calib)
         #: the rectified rig; ``pair`` names the calib rows it came from ("P0", "P1") or ("P2", "P3")
         self.camera, self.pair = camera_from_calib(self.calib_path, not self.name.endswith("_gray"), image_size,
                                                    self.warnings)

@@ -39,7 +39,7 @@ def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind,
     imu = seq.imu
     if imu is None or len(imu) < 2:
         raise GeviError(path, "has no IMU data" if imu is None else "has fewer than 2 IMU samples")
-    offset = imu_time_offset if imu_time_offset is not None else float(getattr(seq, "imu_time_offset_s", 0.0) or 0.0)
+    offset = imu_time_offset if imu_time_offset is not None else float(seq.imu_time_offset_s)
     if imu_stride > 1:
         imu = strided_imu(imu, imu_stride)
     stream = ImuStream.from_sequence(imu, offset, f"{path} (IMU)")  # the report says which noise model it used

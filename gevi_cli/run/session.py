@@ -107,7 +107,7 @@ def choose_method(req: RunRequest, source) -> tuple[str, str]:
     """(method, why): ``--method`` when given, else gevi with an IMU and cfo without."""
     if req.method:
         return req.method, "--method"
-    imu = getattr(source, "imu", None)
+    imu = source.imu
     if imu is not None and len(imu) > 1:
         return "gevi", f"the sequence has an IMU ({len(imu)} samples); --method cfo for stereo only"
     return "cfo", "the sequence has no IMU"
@@ -238,7 +238,7 @@ def _check_image_size(source, start: int, sequence) -> None:
     for name, img, cam in (("cam0", frame.left, rig.cam0), ("cam1", frame.right, rig.cam1)):
         h, w = np.asarray(img).shape[:2]
         if (w, h) != tuple(cam.resolution):
-            where = getattr(source, "calibration_file", None) or sequence
+            where = source.calibration_file or sequence
             raise GeviError(where, f"{name} images are {w}x{h} but the calibration is for "
                                    f"{cam.resolution[0]}x{cam.resolution[1]}: wrong calibration for these images")
 
@@ -247,18 +247,18 @@ def _imu_stream(source, kind: str, cfg, warn, start: int):
     """The checked IMU of ``source`` for GeVI (one-line errors, exit 2, for unusable input)."""
     from gevi_cli.inertial.imu_stream import ImuStream
 
-    name = getattr(source, "path", None) or getattr(source, "name", "sequence")
-    imu = getattr(source, "imu", None)
+    name = source.path
+    imu = source.imu
     if kind == "ov2slam-tracks" or imu is None or len(imu) < 2:
         raise GeviError(name, "has no IMU: GeVI is stereo-inertial; use --method cfo")
     R = np.asarray(source.calibration.T_B_C0, dtype=float)[:3, :3]
     if not (np.all(np.isfinite(R)) and np.allclose(R @ R.T, np.eye(3), atol=1e-6) and np.linalg.det(R) > 0):
-        raise GeviError(getattr(source, "calibration_file", None) or name,
+        raise GeviError(source.calibration_file or name,
                         f"camera-IMU extrinsic T_B_C0 is not a rotation (det {np.linalg.det(R):.6g}, "
                         f"|R R^T - I| = {np.abs(R @ R.T - np.eye(3)).max():.3g})")
     offset = cfg.imu.time_offset_s
     if offset is None:
-        offset = float(getattr(source, "imu_time_offset_s", 0.0) or 0.0)
+        offset = float(source.imu_time_offset_s)
     stream = ImuStream.from_sequence(imu, offset, f"{name} (IMU)", warn, cfg.imu.max_gap_factor)
     t0 = int(source.stamps_ns[start])
     t_last = int(source.stamps_ns[-1])
@@ -274,7 +274,7 @@ def _gt_source(req: RunRequest, source):
     """What `gevi eval --gt` should read for this run (a file or the dataset folder), or None."""
     if req.groundtruth:
         return req.groundtruth
-    if getattr(source, "groundtruth", None) is not None:
+    if source.groundtruth is not None:
         return req.sequence
     return None
 
@@ -301,7 +301,7 @@ def execute(req: RunRequest, echo=print) -> int:
     req, source, kind, cfg, sources, stop = (resolved.req, resolved.source, resolved.kind, resolved.cfg,
                                              resolved.sources, resolved.stop)
     method = req.method
-    for w in getattr(source, "warnings", []):
+    for w in source.warnings:
         echo(f"gevi: warning: {w}", err=True)
     def warn(msg):
         echo(f"gevi: warning: {msg}", err=True)
@@ -310,7 +310,7 @@ def execute(req: RunRequest, echo=print) -> int:
     frontend, odometry = make_pipeline(resolved, warn)
     # read (and check) the ground truth before the run folder exists: a KITTI --gt whose rows do not match
     # the sequence's times.txt is refused in one line without leaving an empty run behind
-    gt_traj = getattr(source, "groundtruth", None)
+    gt_traj = source.groundtruth
     seq_name = source.name
     run_dir = make_run_dir(req.out, Path(req.results_root), req.method, seq_name)
     sensor = "stereo-inertial" if method == "gevi" else "stereo"
