@@ -96,12 +96,8 @@ class Initialisation:
     def _from_motion(self, res, elapsed: float) -> Start | None:
         ic = self.cfg
         poses = self.held[::max(ic.stride, 1)]
-        opts = est.InitOptions(ba_prior_sigma=ic.ba_prior_sigma, acc_noise_density=self.imu.noise.acc_noise_density,
-                               pose_pos_sigma=ic.pose_sigma_m)
         try:
-            r = est.stereo_imu_init(np.array([p[1] for p in poses], dtype=np.int64),
-                                    np.array([p[2][:3, :3] for p in poses]), np.array([p[2][:3, 3] for p in poses]),
-                                    self.imu.t_ns, self.imu.gyro, self.imu.acc, self.R_ic, self.p_ic, opts)
+            r = self._stereo_imu_init([p[1] for p in poses], [p[2] for p in poses])
         except est.EstimatorError as err:
             if elapsed + 0.5 < ic.max_window_s:
                 self._next_try = res.index + max(ic.stride, 1) * 5
@@ -116,6 +112,16 @@ class Initialisation:
         self.info = {"method": "stereo-imu", "at_s": elapsed, "poses": len(poses),
                      "gravity_norm_linear": r.gravity_norm_linear, "rms_rot": r.rms_rot}
         return Start(r.R_WV, b_g=r.b_g.copy(), b_a=r.b_a.copy())
+
+    def _stereo_imu_init(self, t_ns: list[int], T_w_c: list[np.ndarray], b_g0: np.ndarray | None = None):
+        """Spec 9's stereo-IMU initialisation over the rectified-cam0 poses ``T_w_c`` stamped ``t_ns`` (from
+        the gyro bias ``b_g0``, default 0); raises EstimatorError."""
+        ic = self.cfg
+        opts = est.InitOptions(ba_prior_sigma=ic.ba_prior_sigma, acc_noise_density=self.imu.noise.acc_noise_density,
+                               pose_pos_sigma=ic.pose_sigma_m, b_g0=b_g0)
+        return est.stereo_imu_init(np.array(t_ns, dtype=np.int64), np.array([T[:3, :3] for T in T_w_c]),
+                                   np.array([T[:3, 3] for T in T_w_c]), self.imu.t_ns, self.imu.gyro, self.imu.acc,
+                                   self.R_ic, self.p_ic, opts)
 
     # ----------------------------------------------------------------------------- the standstill
     def standstill_gyro_bias(self, res, obs) -> np.ndarray | None:
@@ -203,12 +209,8 @@ class Initialisation:
         if not self._bias_poses or (self._bias_poses[-1][0] - self._bias_poses[0][0]) * 1e-9 < ic.window_s:
             return b_a
         poses = self._bias_poses[::max(ic.stride, 1)]
-        opts = est.InitOptions(ba_prior_sigma=ic.ba_prior_sigma, acc_noise_density=self.imu.noise.acc_noise_density,
-                               pose_pos_sigma=ic.pose_sigma_m, b_g0=b_g)
         try:
-            r = est.stereo_imu_init(np.array([p[0] for p in poses], dtype=np.int64),
-                                    np.array([p[1][:3, :3] for p in poses]), np.array([p[1][:3, 3] for p in poses]),
-                                    self.imu.t_ns, self.imu.gyro, self.imu.acc, self.R_ic, self.p_ic, opts)
+            r = self._stereo_imu_init([p[0] for p in poses], [p[1] for p in poses], b_g0=b_g)
         except est.EstimatorError as err:
             self.info["acc_bias_refined"] = f"failed: {err}"
             return b_a
