@@ -4,7 +4,7 @@ Everything that describes a camera's intrinsics uses :class:`Intrinsics`: the da
 calibration (:class:`~gevi_cli.datasets.calibration.StereoRig` holds one per camera beside the
 camera's pose), the rectified rig the front end and pipelines see
 (:class:`~gevi_cli.observations.RectifiedStereo` holds one with no distortion, beside the baseline)
-and the simulator's cameras (:class:`~gevi_cli.simulate.camera.RenderRig`).
+and the simulator's cameras (the same StereoRig, with a radtan lens).
 
 Frames and units: camera frame x right, y down, z forward (optical axis), metres.  *Normalized*
 coordinates are ``(x, y) = (X/Z, Y/Z)`` (unitless); *pixels* ``(u, v)`` have the centre of the

@@ -17,8 +17,8 @@ from typing import Iterator
 import numpy as np
 
 from gevi_cli.camera import Intrinsics
+from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.geometry import make_T
-from gevi_cli.simulate.camera import RenderRig
 from gevi_cli.simulate.constants import MOCAP_NOISE_POS_M, MOCAP_NOISE_ROT_DEG, MOCAP_RATE_HZ
 from gevi_cli.simulate.imu import ImuParams, ImuSeries, synthesize_imu
 from gevi_cli.simulate.motion import MotionSample
@@ -103,7 +103,7 @@ class SimulatedSequence:
     """Everything the writers need.  Frames are rendered lazily by :meth:`frames`."""
 
     config: SimulationConfig
-    rig: RenderRig
+    rig: StereoRig
     motion: object = field(repr=False)
     scene_builder: object = field(repr=False)
     t0_ns: int = T0_NS
@@ -277,7 +277,7 @@ class SimulatedSequence:
                                  "T_B_C maps camera coordinates into the body frame",
             "cam0": {**cam_dict(self.rig.cam0), "T_B_C": self.rig.T_B_C0.tolist()},
             "cam1": {**cam_dict(self.rig.cam1), "T_B_C": self.rig.T_B_C1.tolist()},
-            "baseline_m": self.rig.baseline_m,
+            "baseline_m": self.rig.baseline,
             "mocap": {"rate_hz": MOCAP_RATE_HZ, "T_B_M": self.T_B_M.tolist(), "noise_pos_m": MOCAP_NOISE_POS_M,
                       "noise_rot_deg": MOCAP_NOISE_ROT_DEG} if self.spec.mocap else None,
         }

@@ -11,8 +11,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from gevi_cli.camera import Intrinsics
+from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.geometry import make_T, small_rotation
-from gevi_cli.simulate.camera import RenderRig
 from gevi_cli.simulate.imu import ImuParams
 from gevi_cli.simulate.motion import (
     CarMotion,
@@ -167,13 +167,13 @@ PRESETS: dict[str, PresetSpec] = {
 
 
 # ------------------------------------------------------------------------------------- rigs
-def build_rig(spec: PresetSpec, camera: Intrinsics, baseline_m: float) -> RenderRig:
+def build_rig(spec: PresetSpec, camera: Intrinsics, baseline_m: float) -> StereoRig:
     """Left/right cameras on the body: cam0 at ``spec.lever_arm_m``, cam1 at +baseline along x_c0."""
     base = R_BC_DOWN if spec.facing == "down" else R_BC_FORWARD
     R_BC0 = small_rotation(*spec.mount_deg) @ base
     T_B_C0 = make_T(R_BC0, spec.lever_arm_m)
     T_C0_C1 = make_T(np.eye(3), [baseline_m, 0.0, 0.0])
-    return RenderRig(camera, camera, T_B_C0, T_B_C0 @ T_C0_C1)
+    return StereoRig(camera, camera, T_B_C0, T_B_C0 @ T_C0_C1)
 
 
 def mocap_marker_extrinsic() -> np.ndarray:

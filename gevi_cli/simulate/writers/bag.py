@@ -21,6 +21,7 @@ import numpy as np
 
 from gevi_cli.datasets.kalibr import write_camchain, write_imu_yaml
 from gevi_cli.geometry import matrix_to_quat_wxyz
+from gevi_cli.simulate.camera import as_read
 from gevi_cli.simulate.writers import write_simulation_yaml
 
 TOPIC_CAM = ("/cam0/image_raw", "/cam1/image_raw")
@@ -38,7 +39,7 @@ def write_bag(seq, out: Path, progress: bool = True, workers: int | None = None,
     out.mkdir(parents=True, exist_ok=True)
     name = name or seq.config.preset
     write_simulation_yaml(out / "simulation.yaml", seq.description("bag"))
-    write_camchain(out / f"{name}_camchain.yaml", seq.rig.to_stereo_rig(), {"left": TOPIC_CAM[0], "right": TOPIC_CAM[1]})
+    write_camchain(out / f"{name}_camchain.yaml", as_read(seq.rig), {"left": TOPIC_CAM[0], "right": TOPIC_CAM[1]})
     imu = seq.config.imu
     write_imu_yaml(out / f"{name}_imu.yaml", gyro_noise_density=imu.gyro_noise_density,
                    gyro_random_walk=imu.gyro_random_walk, acc_noise_density=imu.acc_noise_density,

@@ -128,7 +128,7 @@ def write_euroc(seq, out: Path, progress: bool = True, workers: int | None = Non
         (mav / d).mkdir(parents=True, exist_ok=True)
     write_simulation_yaml(out / "simulation.yaml", seq.description("euroc"))
     (mav / "body.yaml").write_text(f"%YAML:1.0\ncomment: {tag}, body = IMU frame\n")
-    for i, (cam, T) in enumerate(seq.rig.cameras()):
+    for i, (cam, T) in enumerate(((seq.rig.cam0, seq.rig.T_B_C0), (seq.rig.cam1, seq.rig.T_B_C1))):
         (mav / f"cam{i}" / "sensor.yaml").write_text(camera_yaml(f"cam{i}", cam, T, c.rate_hz, f"{tag} cam{i}"))
         csv = [CAM_HEADER] + [f"{t},{t}.png" for t in seq.frame_t_ns.tolist()]
         (mav / f"cam{i}" / "data.csv").write_text("\n".join(csv) + "\n")
