@@ -27,7 +27,8 @@ def pixel_rays(camera: Intrinsics, supersample: int = 1) -> np.ndarray:
     u = (np.arange(camera.width * s) + 0.5) / s - 0.5
     v = (np.arange(camera.height * s) + 0.5) / s - 0.5
     uu, vv = np.meshgrid(u, v)
-    x, y = camera.undistort_normalized((uu - camera.cx) / camera.fx, (vv - camera.cy) / camera.fy)
+    xy = camera.normalize(np.column_stack([uu.ravel(), vv.ravel()])).reshape(uu.shape + (2,))
+    x, y = camera.undistort_normalized(xy[..., 0], xy[..., 1])
     rays = np.stack([x, y, np.ones_like(x)], axis=-1)
     return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
 
