@@ -174,6 +174,13 @@ def _clean(o):
     return o
 
 
+def _scalars(prefix: str, result) -> dict:
+    """``{prefix_name: value}`` of the scalar entries of a result's ``as_dict()`` (none for None)."""
+    if result is None:
+        return {}
+    return {f"{prefix}_{k}": v for k, v in result.as_dict().items() if not isinstance(v, (dict, str))}
+
+
 def write_report(out: Path, tables, results, sequences_info: dict, settings, inputs: dict) -> list[Path]:
     """Write everything but plots into ``out``; return the written files."""
     from gevi_cli import __version__
@@ -206,13 +213,11 @@ def write_report(out: Path, tables, results, sequences_info: dict, settings, inp
         if r.association is not None:
             row.update(matched=r.association.n_matched, est_poses=r.association.n_est,
                        coverage_pct=100 * r.association.coverage)
-        for key, val in (("ate", r.ate), ("rpe", r.rpe), ("kitti", r.kitti), ("scale", r.scale)):
-            if val is not None:
-                for k, v in val.as_dict().items():
-                    if not isinstance(v, (dict, str)):
-                        row[f"{key}_{k}"] = v
+        for key, val in (("ate", r.ate), ("rpe", r.rpe), ("kitti", r.kitti)):
+            row.update(_scalars(key, val))
         if r.alignment is not None:
             row["align_scale"] = r.alignment.scale
+        row.update(_scalars("scale", r.scale))  # after the columns runs.csv had before it
         rows.append(row)
     keys = []
     for row in rows:
