@@ -95,8 +95,8 @@ def evaluate(reference, estimate, align: str = "se3", delta: float = 1.0, unit: 
     trajectory file or a dataset folder (as ``gevi eval --gt``), ``estimate`` a Trajectory or a
     trajectory file (as ``gevi eval -e``); stamps associated within ``max_diff_s`` seconds, the estimate
     aligned by ``align`` (se3, sim3, posyaw, origin, none), RPE over ``delta`` frames (``unit``
-    "frames") or metres ("m").  The PairResult holds ``ate``, ``rpe``, ``kitti``, ``alignment``,
-    ``aligned`` and the ``association``; ``status`` "failed" with a ``reason`` when the two cannot be
+    "frames") or metres ("m").  The PairResult holds ``ate``, ``rpe``, ``kitti``, ``scale`` (path and
+    median step-length ratio, before alignment), ``alignment``, ``aligned`` and the ``association``; ``status`` "failed" with a ``reason`` when the two cannot be
     compared (a file without poses: "no valid poses").  Raises :class:`gevi_cli.errors.GeviError` for
     unusable input."""
     from gevi_cli.evaluation.pair import evaluate_estimate, evaluate_file, groundtruth, read_groundtruth

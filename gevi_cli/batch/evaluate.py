@@ -64,6 +64,11 @@ def _clip_to_run(gt, run_dir: Path, margin_s: float):
     return gt.select(np.flatnonzero(keep)) if keep.sum() >= 3 else gt
 
 
+def _or_none(v: float) -> float | None:
+    """``v``, or None for NaN (JSON has no NaN)."""
+    return None if np.isnan(v) else float(v)
+
+
 def _T(spec_T, T_seq):
     if isinstance(spec_T, (tuple, list)):
         return np.asarray(spec_T, dtype=float).reshape(4, 4)
@@ -141,6 +146,9 @@ def evaluate_batch(specs, baselines, settings, inertial_methods: set, online: bo
         if out.se3 and out.se3[-1].ok:
             run["ate_m"] = out.se3[-1].ate.trans_rmse
             run["rpe_m"] = out.se3[-1].rpe.trans_rmse if out.se3[-1].rpe is not None else None
+            scale = out.se3[-1].scale  # before alignment (gevi_cli.evaluation.scale); None in JSON = n/a
+            run["path_ratio"] = _or_none(scale.path_ratio)
+            run["step_ratio_median"] = _or_none(scale.step_ratio_median)
     for b in baselines:
         if b.state == "n/a":
             continue  # no result: the cell reads n/a

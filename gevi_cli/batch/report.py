@@ -7,7 +7,8 @@ Layout (``OUT/report/``)::
     summary.md, tables/, runs.csv, metrics.json, settings.yaml   as written by `gevi eval`
                              (tables/<key>.md|.csv|.tex; posyaw_* tables; runtime.*)
     plots/                   per sequence trajectories/errors and the ATE bar chart (gevi eval's)
-    results.json             per run: state, frames, ATE/RPE; skipped sequences (what `gevi regress` reads)
+    results.json             per run: state, frames, ATE/RPE, scale (path and median step ratio); skipped
+                             sequences (what `gevi regress` reads)
 
 Tables use the code of :mod:`gevi_cli.evaluation.tables` (one formatter for `gevi eval` and batch).
 """
@@ -109,8 +110,8 @@ def _tables(res, methods, sequences, inertial, settings):
     imethods = [m for m in methods if m in inertial]
     if imethods and res.posyaw:
         for t in build_tables(res.posyaw, imethods, sequences, settings):
-            if t.key.startswith("kitti"):
-                continue
+            if t.key.startswith(("kitti", "scale_")):
+                continue  # the scale figures do not depend on the alignment: the SE(3) tables hold them
             t.key = f"posyaw_{t.key}"
             t.title = f"posyaw (4-DOF, gravity known): {t.title}"
             posyaw.append(t)

@@ -1,8 +1,9 @@
-"""Evaluate one estimate against one ground truth: associate, convert frames, align, ATE/RPE/KITTI.
+"""Evaluate one estimate against one ground truth: associate, convert frames, align, ATE/RPE/KITTI, scale.
 
 Frames: the estimate is brought into the sensor frame of the ground truth (``body`` = IMU, ``cam0``)
-with ``T_B_C0`` (cam0 -> body) *before* alignment, so ATE, RPE and the KITTI metric all compare the
-same frame.  Units: metres, degrees, seconds.
+with ``T_B_C0`` (cam0 -> body) *before* alignment, so ATE, RPE, the KITTI metric and the scale figures
+(:mod:`gevi_cli.evaluation.scale`, on the associated poses before alignment) all compare the same frame.
+Units: metres, degrees, seconds.
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ from gevi_cli.evaluation.associate import Association, associate
 from gevi_cli.evaluation.ate import AteResult, compute_ate
 from gevi_cli.evaluation.kitti_devkit import KittiResult, kitti_errors, raw_poses
 from gevi_cli.evaluation.rpe import RpeResult, compute_rpe
+from gevi_cli.evaluation.scale import ScaleResult, compute_scale
 from gevi_cli.trajectory import Trajectory
 
 #: Translational RPE above this multiple of what the aligned position errors imply flags a frame mix-up.
@@ -78,6 +80,7 @@ class PairResult:
     ate: AteResult | None = None
     rpe: RpeResult | None = None
     kitti: KittiResult | None = None
+    scale: ScaleResult | None = None  # path and step-length ratios, before alignment
     warnings: list = field(default_factory=list)
     aligned: Trajectory | None = None  # aligned, matched estimate (for plots)
     lost: bool = False  # the run lost tracking: some of its poses were bridged, not estimated (batch)
@@ -97,7 +100,7 @@ class PairResult:
                                 "coverage": a.coverage, "by_index": a.by_index, "summary": a.summary()}
         if self.alignment is not None:
             d["alignment"] = self.alignment.as_dict()
-        for key in ("ate", "rpe", "kitti"):
+        for key in ("ate", "rpe", "kitti", "scale"):
             val = getattr(self, key)
             d[key] = val.as_dict() if val is not None else None
         return d
@@ -182,6 +185,7 @@ def evaluate_pair(gt: Trajectory, est: Trajectory, settings: EvalSettings, align
     if assoc.n_matched < 3:
         res.status, res.reason = "failed", f"only {assoc.n_matched} matched poses"
         return res
+    res.scale = compute_scale(assoc.gt, assoc.est)  # unaligned: a Sim(3) scale would hide the error
     aligned, alignment = align(assoc.gt, assoc.est, align_method, settings.n_align)
     w = collinearity_warning(assoc.gt, align_method, settings.n_align)
     if w:

@@ -7,7 +7,8 @@ Layout (see docs/eval.md)::
       tables/<key>.md|.csv|.tex
       tables/all.tex        every table, LaTeX
       runs.csv              one row per estimate (trial) with every scalar
-      metrics.json          every number: settings, association, alignment, ATE, RPE, KITTI per estimate, tables
+      metrics.json          every number: settings, association, alignment, ATE, RPE, KITTI, scale per estimate,
+                            tables
       settings.yaml         the settings and inputs used (re-run documentation)
       plots/                see gevi_cli.evaluation.plots
 """
@@ -17,24 +18,51 @@ import csv
 import json
 import math
 import re
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from gevi_cli.errors import GeviError
+from gevi_cli.evaluation.scale import MIN_STEP_M
 from gevi_cli.evaluation.tables import Cell, Table, render_csv, render_latex, render_markdown
 
-#: (key, title, unit, getter on PairResult)
+
+@dataclass(frozen=True)
+class Metric:
+    """One table of `gevi eval`: ``key`` (its file name), ``title``, ``unit`` and ``get``, the value of a
+    PairResult (None or NaN: none).  ``target``: None when the lowest value is best (an error), else the
+    ideal value (best = closest); ``note``: what the title says of the poses compared (None: the
+    alignment of the results)."""
+
+    key: str
+    title: str
+    unit: str
+    get: Callable
+    target: float | None = None
+    note: str | None = None
+
+
+#: the scale figures are read before alignment (gevi_cli.evaluation.scale), in the GT's sensor frame
+_SCALE_NOTE = "associated poses in the GT's sensor frame, before alignment; best = closest to 1"
+
 METRICS = [
-    ("ate_trans_rmse", "ATE translation RMSE", "m", lambda r: r.ate and r.ate.trans_rmse),
-    ("ate_rot_rmse", "ATE rotation RMSE", "deg", lambda r: r.ate and r.ate.rot_rmse_deg),
-    ("rpe_trans_rmse", "RPE translation RMSE", "m", lambda r: r.rpe and r.rpe.trans_rmse),
-    ("rpe_trans_mean", "RPE translation mean", "m", lambda r: r.rpe and r.rpe.trans_mean),
-    ("rpe_rot_rmse", "RPE rotation RMSE", "deg", lambda r: r.rpe and r.rpe.rot_rmse_deg),
-    ("rpe_rot_mean", "RPE rotation mean", "deg", lambda r: r.rpe and r.rpe.rot_mean_deg),
-    ("kitti_t_err", "KITTI t_err (100-800 m segments)", "%", lambda r: r.kitti and r.kitti.t_err_pct),
-    ("kitti_r_err", "KITTI r_err (100-800 m segments)", "deg/100 m", lambda r: r.kitti and r.kitti.r_err_deg_per_100m),
+    Metric("ate_trans_rmse", "ATE translation RMSE", "m", lambda r: r.ate and r.ate.trans_rmse),
+    Metric("ate_rot_rmse", "ATE rotation RMSE", "deg", lambda r: r.ate and r.ate.rot_rmse_deg),
+    Metric("rpe_trans_rmse", "RPE translation RMSE", "m", lambda r: r.rpe and r.rpe.trans_rmse),
+    Metric("rpe_trans_mean", "RPE translation mean", "m", lambda r: r.rpe and r.rpe.trans_mean),
+    Metric("rpe_rot_rmse", "RPE rotation RMSE", "deg", lambda r: r.rpe and r.rpe.rot_rmse_deg),
+    Metric("rpe_rot_mean", "RPE rotation mean", "deg", lambda r: r.rpe and r.rpe.rot_mean_deg),
+    Metric("scale_path_ratio", "Scale: path-length ratio", "est/GT", lambda r: r.scale and r.scale.path_ratio,
+           target=1.0, note=_SCALE_NOTE),
+    Metric("scale_step_ratio_median", f"Scale: median step-length ratio (GT steps >= {100 * MIN_STEP_M:g} cm)",
+           "est/GT", lambda r: r.scale and r.scale.step_ratio_median, target=1.0, note=_SCALE_NOTE),
+    Metric("kitti_t_err", "KITTI t_err (100-800 m segments)", "%", lambda r: r.kitti and r.kitti.t_err_pct),
+    Metric("kitti_r_err", "KITTI r_err (100-800 m segments)", "deg/100 m", lambda r: r.kitti and r.kitti.r_err_deg_per_100m),
 ]
+#: tables left out when no estimate has a value (no 100 m segment anywhere: short sequences)
+OPTIONAL_TABLES = ("kitti_t_err", "kitti_r_err")
 
 
 def _num(v):
@@ -71,21 +99,25 @@ def build_tables(results, methods, sequences, settings) -> list[Table]:
     rpe_note = f"RPE delta {settings.rpe_delta:g} {settings.rpe_unit}"
     jumps = jumps_note(results, settings)
     tables = []
-    for key, title, unit, get in METRICS:
+    for metric in METRICS:
         cells = {}
         for r in results:
             c = cells.setdefault((r.sequence, r.method), Cell())
             c.n_trials += 1
-            v = _num(get(r)) if r.ok else float("nan")
+            v = _num(metric.get(r)) if r.ok else float("nan")
             if r.ok and not math.isnan(v):
                 c.values.append(v)
                 c.n_lost += bool(r.lost)
-            elif not r.ok:
+            elif r.ok:
+                c.n_na += 1
+            else:
                 c.reasons.append(r.reason)
-        t = Table(key, f"{title} [{unit}] — {note_align}", list(methods), list(sequences), cells,
+        key = metric.key
+        t = Table(key, f"{metric.title} [{metric.unit}] — {metric.note or note_align}", list(methods),
+                  list(sequences), cells, target=metric.target,
                   note="; ".join(filter(None, [rpe_note if key.startswith("rpe") else "", jumps])))
-        if key.startswith("kitti") and t.is_empty():
-            continue  # no 100 m segment anywhere (short sequences)
+        if key in OPTIONAL_TABLES and t.is_empty():
+            continue
         tables.append(t)
     return tables
 
@@ -122,7 +154,8 @@ def _table_json(t: Table) -> dict:
         for m in t.methods:
             c = t.cell(s, m)
             d[s][m] = {k: (None if math.isnan(c.stat(k)) else c.stat(k)) for k in ("mean", "std", "median", "min", "max")}
-            d[s][m].update({"n_ok": c.n_ok, "n_trials": c.n_trials, "values": list(map(float, c.values))})
+            d[s][m].update({"n_ok": c.n_ok, "n_na": c.n_na, "n_trials": c.n_trials,
+                            "values": list(map(float, c.values))})
     d["average"] = {m: (None if math.isnan(t.average(m)) else t.average(m)) for m in t.methods}
     return {"title": t.title, "note": t.note, "cells": d}
 
@@ -139,6 +172,13 @@ def _clean(o):
     if isinstance(o, np.ndarray):
         return _clean(o.tolist())
     return o
+
+
+def _scalars(prefix: str, result) -> dict:
+    """``{prefix_name: value}`` of the scalar entries of a result's ``as_dict()`` (none for None)."""
+    if result is None:
+        return {}
+    return {f"{prefix}_{k}": v for k, v in result.as_dict().items() if not isinstance(v, (dict, str))}
 
 
 def write_report(out: Path, tables, results, sequences_info: dict, settings, inputs: dict) -> list[Path]:
@@ -174,12 +214,10 @@ def write_report(out: Path, tables, results, sequences_info: dict, settings, inp
             row.update(matched=r.association.n_matched, est_poses=r.association.n_est,
                        coverage_pct=100 * r.association.coverage)
         for key, val in (("ate", r.ate), ("rpe", r.rpe), ("kitti", r.kitti)):
-            if val is not None:
-                for k, v in val.as_dict().items():
-                    if not isinstance(v, (dict, str)):
-                        row[f"{key}_{k}"] = v
+            row.update(_scalars(key, val))
         if r.alignment is not None:
             row["align_scale"] = r.alignment.scale
+        row.update(_scalars("scale", r.scale))  # after the columns runs.csv had before it
         rows.append(row)
     keys = []
     for row in rows:

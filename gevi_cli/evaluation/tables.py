@@ -5,9 +5,12 @@ A cell holds the values of every trial (run) of a method on a sequence:
 * one trial: the value; ``failed`` when it failed (missing, no valid poses, low coverage);
 * N trials: ``mean ± std`` (sample std, ddof=1) on the sequence row, and ``median (min, max)`` on an
   extra row below it; failed trials are left out and counted (``[k/N failed]``); all failed -> ``failed``.
+* a trial that succeeded but has no value for the metric (a scale ratio of a sequence at rest) is left
+  out and counted (``[k/N n/a]``); no value and no failure -> ``n/a``.
 
-In each row the best value (lowest; all gevi metrics are errors) is **bold** and the second best is
-marked: Markdown and console ``_x_``, LaTeX ``\\underline{x}`` (and ``\\textbf`` for the best).
+In each row the best value is **bold** and the second best is marked: Markdown and console ``_x_``,
+LaTeX ``\\underline{x}`` (and ``\\textbf`` for the best).  Best is the lowest (an error) or, for a table
+with a ``target`` (a scale ratio: 1), the closest to the target.
 The average row is the mean over sequences of the per-sequence means; it is ``n/a`` for a method that
 failed on some sequence (an average over a subset would not compare).
 """
@@ -29,6 +32,7 @@ class Cell:
     n_trials: int = 0
     reasons: list = field(default_factory=list)
     n_lost: int = 0  # trials among the values whose run lost tracking (poses partly bridged)
+    n_na: int = 0  # trials that succeeded but whose value is undefined (n/a: e.g. no motion to read a scale from)
 
     @property
     def n_ok(self) -> int:
@@ -67,6 +71,7 @@ class Table:
     note: str = ""
     average_row: bool = True  # False for tables whose rows are not sequences (a runtime table's stages)
     row_label: str = "sequence"  # header of the first column
+    target: float | None = None  # None: the lowest value is best; else the closest to it (|v - target|)
 
     def cell(self, sequence: str, method: str) -> Cell:
         return self.cells.get((sequence, method), Cell())
@@ -127,9 +132,12 @@ def _cell_text(kind: str, c) -> tuple[str, float]:
         return fmt(c), c
     if c.n_trials == 0:  # never run (e.g. a baseline that does not exist for this sequence)
         return "n/a", float("nan")
+    n_failed = c.n_trials - c.n_ok - c.n_na
+    failed_note = f" [{n_failed}/{c.n_trials} failed]" if n_failed else ""
     if c.failed:
-        return "failed", float("nan")
-    failed_note = f" [{c.n_trials - c.n_ok}/{c.n_trials} failed]" if c.n_ok < c.n_trials else ""
+        return ("n/a" + failed_note if c.n_na else "failed"), float("nan")
+    if c.n_na:
+        failed_note += f" [{c.n_na}/{c.n_trials} n/a]"
     if c.n_lost:  # a number, but not one of a run that tracked throughout: say so in the cell
         failed_note += f" [{c.n_lost}/{c.n_trials} lost tracking]" if c.n_trials > 1 else " [lost tracking]"
     if kind == "median":
@@ -172,6 +180,8 @@ def _grid(table: Table, style: str) -> list[list[str]]:
         texts, vals = {}, {}
         for m, c in cells.items():
             texts[m], vals[m] = _cell_text(kind, c)
+        if table.target is not None:
+            vals = {m: abs(v - table.target) for m, v in vals.items()}
         ranks = _ranks(vals)
         row = [label]
         for m in table.methods:

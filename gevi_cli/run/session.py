@@ -455,10 +455,13 @@ def _evaluate_one(run_dir: Path, req: RunRequest, cfg, truth, seq_name: str, sta
     if not (r.ok and r.ate is not None):
         return _failed(r.reason, echo)
     rpe = r.rpe.trans_rmse if r.rpe is not None else float("nan")
-    echo(f"ATE {_metres(r.ate.trans_rmse)}, RPE {_metres(rpe)} ({r.align.upper()}, body frame, RPE over "
+    ratio = r.scale.path_ratio  # before alignment: the estimate's path over the ground truth's (n/a at rest)
+    echo(f"ATE {_metres(r.ate.trans_rmse)}, RPE {_metres(rpe)}, path-length ratio "
+         f"{'n/a' if np.isnan(ratio) else f'{ratio:.3f}'} est/GT ({r.align.upper()}, body frame, RPE over "
          f"{cfg.run.rpe_delta:g} frame; {r.association.summary()})")
     return {"align": r.align, "ate_m": r.ate.trans_rmse, "rpe_m": rpe,
-            "ate_rot_deg": getattr(r.ate, "rot_rmse_deg", None), "matched": r.association.n_matched}, r
+            "ate_rot_deg": getattr(r.ate, "rot_rmse_deg", None), "matched": r.association.n_matched,
+            "path_ratio": None if np.isnan(ratio) else ratio}, r
 
 
 def _metres(x: float) -> str:

@@ -48,6 +48,22 @@ def test_small_batch_results_tree_and_report(small_batch):
     assert pngs and html.count("src='data:image/png;base64,") == len(pngs) and "<table>" in html
     res = json.loads((rep / "results.json").read_text())
     assert len(res["runs"]) == 4 and all(r["ate_m"] > 0 and r["rpe_m"] > 0 for r in res["runs"])
+    # scale next to ATE/RPE: its tables (SE(3) only: no alignment enters), per run in results.json, per
+    # estimate in metrics.json; read before alignment, so the posyaw evaluation reads the same bits
+    assert "### Scale: path-length ratio [est/GT]" in md and "### Scale: median step-length ratio" in md
+    assert "posyaw (4-DOF, gravity known): Scale" not in md
+    scale = {}
+    for r in json.loads((rep / "metrics.json").read_text())["results"]:
+        scale.setdefault((r["method"], r["trial"]), []).append(r["scale"])
+    for r in res["runs"]:
+        se3_posyaw = scale[(r["method"], f"trial{r['trial']}")]
+        assert all(sc == se3_posyaw[0] for sc in se3_posyaw)
+        assert r["path_ratio"] == se3_posyaw[0]["path_ratio"] > 0
+        assert r["step_ratio_median"] == se3_posyaw[0]["step_ratio_median"] > 0
+    for m in ("cfo", "gevi"):
+        trials = [r["path_ratio"] for r in res["runs"] if r["method"] == m]
+        cell = res["cells"]["scale_path_ratio"]["pool-easy-5s"][m]
+        assert cell["n_ok"] == 2 and cell["mean"] == pytest.approx(sum(trials) / 2, rel=1e-15)
 
 
 def test_resume_after_kill_completes_only_missing_runs(small_config, small_batch, tmp_path):
