@@ -35,6 +35,7 @@ from .minimal3pt import (
 from .noise import sigma2_onesided, sigma2_stereo, sigma2_symmetric
 from .pnp4 import bias_terms, build_A, epipolar_residuals_jac, pnp4_be, pnp4_gn, pnp4_ls, row_vectors
 from .pnp6 import (
+    bearing_only,
     bias_matrix_G,
     build_H,
     depth_weights,
@@ -49,6 +50,7 @@ from .pnp6 import (
 from .triangulation import triangulate, triangulate_jacobian
 
 __all__ = [
+    "bearing_only",
     "EstimatorError",
     "DegenerateInput",
     "TooFewPoints",

@@ -134,6 +134,30 @@ def depth_weights(p) -> np.ndarray:
     return Z ** -1.5
 
 
+BEARING_DEPTH_STD = 1e3
+"""Depth std, in units of the point's depth, that :func:`bearing_only` gives a far point: so large
+that its depth carries no weight, while its direction keeps the weight of its image noise."""
+
+
+def bearing_only(p, cov, far):
+    """``cov`` (n, 3, 3) with the depth of the points ``far`` (n,) bool made unknown: variance
+    ``(BEARING_DEPTH_STD |p|)^2`` added along each far point's ray ``p / |p|`` (keyframe-left, m).
+
+    Projected by the weighted step (:func:`pnp6_refine`), such a point constrains the current pose by
+    its bearing only: nothing along its epipolar line, the image noise across it (the two-view
+    epipolar constraint).  This is ORB-SLAM's rule for stereo points beyond 35-40 baselines, whose
+    stereo depth is too uncertain (and too biased) to give scale."""
+    p = as_points(p, 3, "p")
+    cov = as_covs(cov, len(p), 3, "cov")
+    far = np.asarray(far, dtype=bool)
+    if not far.any():
+        return cov
+    pf = p[far]
+    out = cov.copy()
+    out[far] += BEARING_DEPTH_STD ** 2 * pf[:, :, None] * pf[:, None, :]  # (k |p|)^2 r r^T, r = p / |p|
+    return out
+
+
 def reprojection_residuals(R, t, p, q):
     """r_i = q_i - pi(R p_i + t), (n, 2); raises DegenerateInput if a point is behind the camera."""
     X = p @ np.asarray(R).T + t

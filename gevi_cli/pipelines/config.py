@@ -67,6 +67,9 @@ class PnPConfig:
     method: str = opt("be-w", "'be-w' (Bias-Eli + weighted LM step), 'be' (Bias-Eli only), 'ls' (CPnP LS + "
                               "weighted step), 'epnp' / 'sqpnp' (OpenCV + LM)")
     refine_steps: int = opt(1, "weighted LM steps after the linear estimate, at least (the method: 1)")
+    far_baselines: float = opt(0.0, "points farther than this many stereo baselines constrain the weighted step by "
+                                    "bearing only (ORB-SLAM's close/far rule uses 35-40); 0: every point by its stereo "
+                                    "depth")
     step_tol: float = opt(4.0, "[PROPOSAL] more steps while the last one exceeded this in the pose's own metric "
                                "(delta^T H delta); 0: exactly refine_steps steps")
     max_refine_steps: int = opt(10, "at most this many weighted steps")
@@ -226,6 +229,8 @@ class OdometryConfig:
             raise GeviError(f"{where}: fusion.bias_window_s", f"must be >= 0 (s), got {self.fusion.bias_window_s}")
         if not self.fusion.bias_max_std > 0:
             raise GeviError(f"{where}: fusion.bias_max_std", f"must be > 0 (m/s^2), got {self.fusion.bias_max_std}")
+        if not self.pnp.far_baselines >= 0:
+            raise GeviError(f"{where}: pnp.far_baselines", f"must be >= 0 (0: off), got {self.pnp.far_baselines}")
         if not self.pnp.step_tol >= 0:
             raise GeviError(f"{where}: pnp.step_tol", f"must be >= 0, got {self.pnp.step_tol}")
         if not self.pnp.max_refine_steps >= 1:

@@ -207,7 +207,8 @@ class GeviOdometry(KeyframeOdometry):
     # ---------------------------------------------------------------------------- pose step
     def estimate_T_ck(self, m: Matches, frame) -> np.ndarray:
         if self.plan.mode != GEVI:
-            R, t, fallback = tracked_pose6(m.p, m.cov_unit * self.sigma2, m.q, self.cfg.pnp, self.sigma2, self.camera.f)
+            R, t, fallback = tracked_pose6(m.p, m.cov_unit * self.sigma2, m.q, self.cfg.pnp, self.sigma2, self.camera.f,
+                                           self.far_points(m))
             self.fallbacks += int(fallback)
             return make_T(R, t)
         cov = m.cov_unit * self.sigma2

@@ -89,6 +89,13 @@ class KeyframeOdometry:
         self._bitgen.advance(self.index << 64)
         return self._rng
 
+    def far_points(self, m: Matches) -> np.ndarray | None:
+        """The matches whose keyframe point lies beyond ``pnp.far_baselines`` stereo baselines (n,) bool, or
+        None when the rule is off.  In normalized coordinates the disparity is ``baseline / Z``, so the
+        test ``z_x - y_x < 1 / far_baselines`` holds for every rig."""
+        nb = self.cfg.pnp.far_baselines
+        return None if nb <= 0 else (m.z[:, 0] - m.y[:, 0]) < 1.0 / nb
+
     # ------------------------------------------------------------------ to be provided by pipelines
     def estimate_T_ck(self, m: Matches, frame) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError
@@ -173,8 +180,15 @@ class KeyframeOdometry:
         """The frame into the window of the current keyframe; a new keyframe (with the local BA) when the
         source or the keyframe rule says so; the poses that can no longer change made final."""
         decision = self.frontend.keyframe_decision(frame)
-        if decision is None:
-            decision = self.kf is None or T_ck is None or self._keyframe_rule(res, disp_px)
+        if decision is not None:
+            res.kf_trigger = "source" if decision else ""
+        elif self.kf is None:
+            res.kf_trigger = "first"
+        elif T_ck is None:
+            res.kf_trigger = "untracked"
+        else:
+            res.kf_trigger = self._keyframe_rule(res, disp_px)
+        decision = bool(res.kf_trigger)
         if self.kf is not None:
             # every tracked feature enters the BA (its robust kernel handles the outliers): measured,
             # verified-only observations gave KITTI 04 gray ATE 0.417 m instead of 0.349 m
@@ -318,13 +332,16 @@ class KeyframeOdometry:
         self._last = (m.p, m.q)
         return T_ck, n_match, len(m.ids), disp_px
 
-    def _keyframe_rule(self, res: FrameResult, disp_px: float) -> bool:
+    def _keyframe_rule(self, res: FrameResult, disp_px: float) -> str:
+        """Why the tracked frame ``res`` becomes a keyframe ("": it does not): "inliers" (fewer verified
+        matches than ``min_tracked_ratio`` of the keyframe's points or ``min_tracked``), "displacement" (the
+        mean image displacement since the keyframe), "frames" (``max_frames`` since it)."""
         k = self.cfg.keyframe
         if res.n_inliers < max(k.min_tracked_ratio * len(self.kf), k.min_tracked):
-            return True
+            return "inliers"
         if disp_px > k.max_mean_disp_px:
-            return True
-        return bool(k.max_frames and res.index - self.kf.index >= k.max_frames)
+            return "displacement"
+        return "frames" if k.max_frames and res.index - self.kf.index >= k.max_frames else ""
 
     def _insert_keyframe(self, frame, res: FrameResult, timings) -> None:
         cfg = self.cfg

@@ -17,12 +17,15 @@ from gevi_cli.pipelines.config import PnPConfig
 from gevi_cli.pipelines.verification import TrackingFailure
 
 
-def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig, sigma2: float, f: float = 1.0):
+def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig, sigma2: float, f: float = 1.0,
+                   far: np.ndarray | None = None):
     """``(R_ck, t_ck, used_fallback)``: maps keyframe-left points ``p`` (n, 3, m) onto current
     normalized ``q`` (n, 2).
 
     ``cov`` (n, 3, 3) point covariances (normalized-noise units already applied); ``sigma2`` the
-    normalized image-noise variance; ``f`` the focal length (px) for the fallback test.
+    normalized image-noise variance; ``f`` the focal length (px) for the fallback test; ``far`` (n,)
+    bool: the points beyond ``cfg.far_baselines``, which the weighted steps see by bearing only
+    (:func:`gevi_cli.estimators.bearing_only`; the linear step keeps their stereo covariance).
 
     The CPnP linear model (spec 5.1) is degenerate for coplanar points (a pool floor seen from
     above: measured median reprojection errors of 5-13 px after the step on a planar render).  So for
@@ -31,19 +34,20 @@ def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig
     redone from SQPnP (spec 5.5 [PROPOSAL]: "any robust PnP
     followed by LM") and the better of the two is kept.  Raises :class:`TrackingFailure`.
     """
-    R, t, fallback, _ = _pose6_and_median(p, cov, q, cfg, sigma2, f)
+    R, t, fallback, _ = _pose6_and_median(p, cov, q, cfg, sigma2, f, far)
     return R, t, fallback
 
 
-def _pose6_and_median(p, cov, q, cfg: PnPConfig, sigma2: float, f: float):
+def _pose6_and_median(p, cov, q, cfg: PnPConfig, sigma2: float, f: float, far=None):
     """:func:`estimate_pose6` and the median reprojection error (px) of its pose over all matches
     when the fallback test had to compute it (None otherwise), so the tracking gates need not
     compute it again."""
+    cov_w = _weighted_cov(p, cov, far)
     if cfg.method not in ("be-w", "ls") or cfg.fallback_sigmas <= 0:
-        R, t = _estimate(p, cov, q, cfg, sigma2)
+        R, t = _estimate(p, cov, cov_w, q, cfg, sigma2)
         return R, t, False, None
     try:
-        R, t = _estimate(p, cov, q, cfg, sigma2)
+        R, t = _estimate(p, cov, cov_w, q, cfg, sigma2)
         err = reprojection_median_px(R, t, p, q, f)
         first_failure = None
     except TrackingFailure as failure:  # e.g. the step from a degenerate linear start put points behind
@@ -52,7 +56,7 @@ def _pose6_and_median(p, cov, q, cfg: PnPConfig, sigma2: float, f: float):
     if err <= converged_limit_px(cfg, sigma2, f):
         return R, t, False, err
     try:
-        R2, t2 = _weighted_steps(*opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False), p, cov, q, cfg, sigma2)
+        R2, t2 = _weighted_steps(*opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False), p, cov_w, q, cfg, sigma2)
         err2 = reprojection_median_px(R2, t2, p, q, f)
     except (est.EstimatorError, cv2.error, TrackingFailure):
         err2 = float("inf")
@@ -71,7 +75,14 @@ def converged_limit_px(cfg: PnPConfig, sigma2: float, f: float) -> float:
     return max(cfg.fallback_sigmas * np.sqrt(sigma2) * f, cfg.fallback_min_px)
 
 
-def _estimate(p, cov, q, cfg: PnPConfig, sigma2: float):
+def _weighted_cov(p, cov, far):
+    """The point covariances the weighted steps use: ``cov`` with the ``far`` points' depth unknown."""
+    return cov if far is None else est.bearing_only(p, cov, far)
+
+
+def _estimate(p, cov, cov_w, q, cfg: PnPConfig, sigma2: float):
+    """The pose step of ``cfg.method``: the linear step with the stereo covariances ``cov``, the weighted
+    steps with ``cov_w``."""
     try:
         if cfg.method in ("epnp", "sqpnp"):
             return opencv_pnp(p, q, cv2.SOLVEPNP_EPNP if cfg.method == "epnp" else cv2.SOLVEPNP_SQPNP, refine=True)
@@ -81,7 +92,7 @@ def _estimate(p, cov, q, cfg: PnPConfig, sigma2: float):
         else:
             R, t = est.pnp6_be(p, cov, q, weights=w)
         if cfg.method in ("be-w", "ls"):
-            R, t = _weighted_steps(R, t, p, cov, q, cfg, sigma2)
+            R, t = _weighted_steps(R, t, p, cov_w, q, cfg, sigma2)
         return R, t
     except est.EstimatorError as err:
         raise TrackingFailure(f"{cfg.method}: {err}") from None
@@ -180,25 +191,27 @@ def reverified(p: np.ndarray, q: np.ndarray, med: float, cfg: PnPConfig, sigma2:
     return None
 
 
-def tracked_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig, sigma2: float, f: float):
+def tracked_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig, sigma2: float, f: float,
+                  far: np.ndarray | None = None):
     """The 6-DOF tracking step of the pipelines: (R_ck, t_ck, fell_back) or :class:`TrackingFailure`.
 
     :func:`estimate_pose6`, then the sanity gates: finite, median reprojection error below
     ``cfg.max_median_px``.  CurrentFeature Odometry uses it for every frame, GeVI before its
     initialisation and where the IMU has a gap.
     """
-    R, t, fallback, med = _pose6_and_median(p, cov, q, cfg, sigma2, f)
+    R, t, fallback, med = _pose6_and_median(p, cov, q, cfg, sigma2, f, far)
     if not _finite(R, t):
         raise TrackingFailure("non-finite pose")
     if med is None:
         med = reprojection_median_px(R, t, p, q, f)
     if cfg.reverify and med > converged_limit_px(cfg, sigma2, f):
         again = reverified(p, q, med, cfg, sigma2, f,
-                           lambda keep: estimate_pose6(p[keep], cov[keep], q[keep], cfg, sigma2, f))
+                           lambda keep: estimate_pose6(p[keep], cov[keep], q[keep], cfg, sigma2, f,
+                                                       None if far is None else far[keep]))
         if again is not None:
             (R, t, fallback), med = again
     if cfg.chi2_gate > 0 and cfg.method in ("be-w", "ls"):
-        R, t, med = _chi2_refit(R, t, p, cov, q, cfg, sigma2, f, med)
+        R, t, med = _chi2_refit(R, t, p, _weighted_cov(p, cov, far), q, cfg, sigma2, f, med)
     if med > cfg.max_median_px:
         raise TrackingFailure(f"median reprojection error {med:.2f} px after the pose step")
     return R, t, fallback

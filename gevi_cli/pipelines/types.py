@@ -22,7 +22,9 @@ class FrameResult:
     ``inertial`` when it could not be tracked visually and the IMU carried it (GeVI).
     ``final`` lists ``(index, T_w_c)`` poses that will not change any more (after the local BA of the
     window they belong to, or immediately without BA); every frame appears there exactly once over a
-    run (the last ones on ``Odometry.finish()``).
+    run (the last ones on ``Odometry.finish()``).  ``kf_trigger`` says why the keyframe rule asked for a
+    keyframe here ("" : it did not; ``keyframe`` says whether one was made): "first", "untracked",
+    "inliers", "displacement", "frames", or "source" (a track export's own keyframes).
     """
 
     index: int
@@ -30,6 +32,7 @@ class FrameResult:
     T_w_c: np.ndarray
     status: str = OK
     keyframe: bool = False
+    kf_trigger: str = ""
     n_matches: int = 0
     n_inliers: int = 0
     sigma_px: float = float("nan")

@@ -21,7 +21,7 @@ STAGES = ("read", "frontend", "fe_rectify", "fe_pyramid", "fe_derotate", "fe_lk"
           "fe_reacquire", "verify", "noise", "pose", "keyframe", "ba")
 
 #: frames.csv columns
-FRAME_COLUMNS = ("index", "t_ns", "status", "keyframe", "matches", "inliers", "sigma_px", "message")
+FRAME_COLUMNS = ("index", "t_ns", "status", "keyframe", "matches", "inliers", "sigma_px", "kf_trigger", "message")
 
 
 class RunSink(Protocol):
@@ -78,7 +78,7 @@ class FolderSink:
             f"{res.timings.get(s, 0.0) * 1e3:.3f}" for s in STAGES) + "\n")
         msg = res.message.replace(",", ";").replace("\n", " ")
         self._frames.write(f"{index},{res.t_ns},{res.status},{int(res.keyframe)},{res.n_matches},{res.n_inliers},"
-                           f"{res.sigma_px:.4f},{msg}\n")
+                           f"{res.sigma_px:.4f},{res.kf_trigger},{msg}\n")
         if self._states is not None and res.extra:
             self._states.write(",".join(_fmt(res.extra.get(c, "")) for c in self._state_cols) + "\n")
 
@@ -112,7 +112,7 @@ class MemorySink:
 
     def frame(self, index, res, total_s):
         self.frame_rows.append((index, res.t_ns, res.status, int(res.keyframe), res.n_matches, res.n_inliers,
-                                res.sigma_px, res.message))
+                                res.sigma_px, res.kf_trigger, res.message))
         self.timing_rows.append((index, res.t_ns, total_s * 1e3) + tuple(res.timings.get(s, 0.0) * 1e3 for s in STAGES))
         if res.extra:
             self.state_rows.append(dict(res.extra))

@@ -177,3 +177,30 @@ def test_whitened_residuals_are_chi_square_2(rng):
     behind = p.copy()
     behind[0] = -(s.R.T @ (s.t + np.array([0.0, 0.0, 1.0])))  # 1 m behind the current camera
     assert np.isinf(pnp6_whitened_sq(s.R, s.t, behind, cov, q, s2)[0])
+
+
+def test_bearing_only_far_depth_errors_do_not_move_the_weighted_step(rng):
+    """A far point whose stereo depth is wrong (here 20 % too far) still lies on its keyframe ray, so its
+    reprojection slides along its epipolar line only.  With its depth made unknown (bearing_only) the
+    weighted step gives that direction no weight: from the true pose it stays at the true pose (the
+    near points and every bearing are exact), whereas with the stereo covariance it is dragged."""
+    from gevi_cli.estimators import bearing_only
+
+    s = sim.scene6(rng, 200)
+    p = s.P.copy()
+    far = p[:, 2] > np.median(p[:, 2])
+    p[far] *= 1.2
+    cov = np.broadcast_to(1e-6 * np.eye(3), (len(p), 3, 3)).copy()
+    R0, t0 = pnp6_refine(s.R, s.t, p, cov, s.q_o)
+    R1, t1 = pnp6_refine(s.R, s.t, p, bearing_only(p, cov, far), s.q_o)
+    assert np.linalg.norm(t0 - s.t) > 1e-3  # the wrong depths pull the stereo-weighted step
+    assert np.linalg.norm(t1 - s.t) < 1e-6 * np.linalg.norm(s.t)
+    assert rotation_error(R1, s.R) < 1e-6
+    # the near points keep their covariance, the far ones gain (k |p|)^2 along their ray only
+    out = bearing_only(p, cov, far)
+    assert np.array_equal(out[~far], cov[~far])
+    r = p[far] / np.linalg.norm(p[far], axis=1)[:, None]
+    perp = np.cross(r, [0.0, 0.0, 1.0])
+    perp /= np.linalg.norm(perp, axis=1)[:, None]
+    assert np.allclose(np.einsum("ni,nij,nj->n", perp, out[far], perp), 1e-6)
+    assert np.all(np.einsum("ni,nij,nj->n", r, out[far], r) > 1e5 * np.einsum("ij,ij->i", p[far], p[far]))

@@ -189,3 +189,18 @@ def test_frames_after_the_last_keyframe_get_the_closing_ba(render, tmp_path, cap
     assert np.abs(after[k0 + 1:] - online[k0 + 1:]).max() > 0  # the BA moved the tail
     # its result is the BA of a full-length window: within a few mm of the tracked poses on this render
     assert np.abs(after[k0 + 1:, :3] - online[k0 + 1:, :3]).max() < 5e-3
+
+
+def test_frames_csv_says_why_each_keyframe_was_made(render, tmp_path, capsys):
+    """frames.csv's kf_trigger: "first" on frame 0, a reason of the rule on every other keyframe, none
+    on the frames the rule kept in a keyframe's window."""
+    import pandas as pd
+
+    out = tmp_path / "run"
+    assert run_cli(["run", render, "--method", "cfo", "-o", out, "-q"], capsys)[0] == 0
+    frames = pd.read_csv(out / "frames.csv", keep_default_na=False)
+    assert frames.kf_trigger.iloc[0] == "first"
+    kf = frames[frames.keyframe == 1]
+    assert set(kf.kf_trigger.iloc[1:]) <= {"inliers", "displacement", "frames", "untracked"}
+    assert (frames[frames.keyframe == 0].kf_trigger == "").all()
+    assert len(kf) < len(frames)
