@@ -3,7 +3,8 @@
 Rows: euroc_micro's real IMU at 200, 100 and 50 Hz (``--imu-stride 1/2/4``), ``gevi simulate mav``
 renders (seeds 1-3 at 50 and 200 Hz) and, for calm underwater-like motion, ``gevi simulate pool-easy
 --imu-only --duration 60`` (seeds 1-3, 200 Hz).  Each row is one ``gevi imu`` run; the table gives the tilt
-RMSE of every filter it compares and the complementary filter's chosen time constant.
+RMSE of the filters it compares (on the reference aligned to the IMU from the angular rates, printed),
+the complementary filter's chosen time constant and the VQF reference rows.
 
     python scripts/imu_regimes.py [--work DIR] [--data ../shared/data] [--no-noise-model]
 
@@ -60,17 +61,23 @@ def main() -> None:
         if not out.is_dir():
             gevi("simulate", "pool-easy", out, "--imu-only", "--duration", 60, "--seed", seed, *extra)
         jobs.append((f"pool-easy seed {seed} 200 Hz", [out]))
-    print("| sequence | velocity-aided (gevi imu) | gravity prior, adaptive | best complementary | its time constant |")
-    print("|---|---|---|---|---|")
+    print("| sequence | velocity-aided (gevi imu) | gravity prior, adaptive | best complementary (oracle) | its time "
+          "constant | VQF online | VQF offline | reference alignment |")
+    print("|---|---|---|---|---|---|---|---|")
     for name, args in jobs:
-        r = rows_of(gevi("imu", *args, "-o", work / "imu" / name.replace(" ", "_"), "--no-plots"))
-        ours = r["velocity-aided filter (gevi imu)"][0]
-        comp, note = r["complementary filter, fixed gain"]
+        out = gevi("imu", *args, "-o", work / "imu" / name.replace(" ", "_"), "--no-plots")
+        r = rows_of(out)
+        al = re.search(r"clock offset ([-+0-9.]+ ms).*?rotation ([0-9.]+ deg)", out)
+        al = f"{al.group(1)}, {al.group(2)}" if al else "none"
+        vqf = [v for k, v in r.items() if k.startswith("VQF 6D online")][0][0], \
+            [v for k, v in r.items() if k.startswith("VQF 6D offline")][0][0]
+        ours = r["velocity-aided filter (gevi imu), causal"][0]
+        comp, note = r["complementary filter, fixed gain (oracle)"]
         tau = re.search(r"time constant ([0-9.e+-]+) s", note).group(1)
         edge = " (GRID EDGE)" if "EDGE" in note else ""
         mark = "**" if ours <= comp else ""
-        print(f"| {name} | {mark}{ours:.2f}{mark} | {r['gravity-prior filter, adaptive weight'][0]:.2f} | {comp:.2f} | "
-              f"{tau} s{edge} |", flush=True)
+        print(f"| {name} | {mark}{ours:.2f}{mark} | {r['gravity-prior filter, adaptive weight, causal'][0]:.2f} | {comp:.2f} | "
+              f"{tau} s{edge} | {vqf[0]:.2f} | {vqf[1]:.2f} | {al} |", flush=True)
 
 
 if __name__ == "__main__":

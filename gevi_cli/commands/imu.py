@@ -21,16 +21,22 @@ from gevi_cli.commands.options import add_sequence_options  # noqa: E402
 @click.option("--no-plots", is_flag=True, help="Skip the plots.")
 @click.option("--imu-stride", type=click.IntRange(min=1), default=1, show_default=True, metavar="K",
               help="Use every K-th IMU sample (a K-times slower IMU, e.g. 200 Hz -> 50 Hz with 4).")
+@click.option("--no-align", is_flag=True,
+              help="Score on the ground truth as given: no clock offset or IMU-from-reference rotation estimated "
+                   "from the angular rates (for references known to be aligned; BROAD's always are).")
 @add_sequence_options
-def command(sequence, out, results_root, imu_time_offset, no_plots, imu_stride, kind, groundtruth, calib, imu_calib,
-            topics, cameras):
+def command(sequence, out, results_root, imu_time_offset, no_plots, imu_stride, no_align, kind, groundtruth, calib,
+            imu_calib, topics, cameras):
     """IMU report of SEQUENCE: rate and gaps, standstill intervals, the starting gyro bias and gravity
     direction, white noise measured at rest next to the stated densities, and roll/pitch over the
-    whole stream (IMU-only filter with an adaptive gravity prior; against ground truth when there is
-    some, next to gyro-only integration and a fixed-gain complementary filter at the best time constant
-    of a 1-2-5 grid, chosen on the ground truth).  With no noise model stated, the filter uses the white
-    noise measured at the longest standstill, and says so.  SEQUENCE may also be an IMU-only EuRoC
-    folder (mav0/imu0 and ground truth, no cameras: `gevi simulate mav`).
+    whole stream (IMU-only velocity-aided filter; against ground truth when there is some, next to
+    GeVI's gravity-prior filter, gyro-only integration, a fixed-gain complementary filter at the best
+    time constant of a 1-2-5 grid, chosen on the ground truth (oracle), and VQF 6D online and offline).
+    A motion-capture ground truth is first put on the IMU clock and into the IMU frame from the angular
+    rates alone (clock offset and rotation printed; --no-align to skip).  With no noise model stated,
+    the filter uses the white noise measured at the longest standstill, and says so.  SEQUENCE may also
+    be an IMU-only EuRoC folder (mav0/imu0 and ground truth, no cameras: `gevi simulate mav`) or a BROAD
+    trial .mat (scored as the benchmark does: inclination over the movement samples).
 
     Writes imu_states.csv, attitude.tum (orientation of the body in a gravity-aligned frame, zero
     position), report.md and plots.
@@ -44,4 +50,4 @@ def command(sequence, out, results_root, imu_time_offset, no_plots, imu_stride, 
 
     run_imu_report(sequence, out=out, results_root=results_root, imu_time_offset=imu_time_offset, plots=not no_plots,
                    kind=kind, groundtruth=groundtruth, calib=calib, imu_calib=imu_calib, topics=topics,
-                   cameras=cameras, imu_stride=imu_stride, echo=click.echo)
+                   cameras=cameras, imu_stride=imu_stride, align=not no_align, echo=click.echo)

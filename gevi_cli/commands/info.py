@@ -22,6 +22,11 @@ def command(path, kind, groundtruth, calib, imu_calib, topics, cameras):
 
     options = sequence_kwargs(groundtruth, calib, topics, cameras, imu_calib)
     echo = click.echo
+    from gevi_cli.datasets.broad import is_broad_mat
+
+    if kind is None and is_broad_mat(path):
+        _describe_broad(path, echo)
+        return
     if (kind or detect_kind(path)) == "rosbag" and is_bag(path):
         _describe_bag(path, options, echo)
         return
@@ -49,6 +54,26 @@ def _describe_bag(path, options, echo) -> None:
         echo(f"path          {path}")
     for line in describe(inv) + usable_by(inv, problem):
         echo(line)
+
+
+def _describe_broad(path, echo) -> None:
+    """A BROAD trial (.mat): IMU, the optical reference and the movement phases the benchmark scores."""
+    from gevi_cli.datasets.broad import BroadTrial
+
+    trial = BroadTrial(path)
+    imu, n = trial.imu, len(trial.t_ns)
+    echo(f"sequence      {trial.name}  (broad: BROAD benchmark trial, Laidig et al. 2021)")
+    echo(f"path          {path}")
+    echo(f"imu           {n} samples at {trial.rate_hz:.3f} Hz over {imu.duration_s:.1f} s (gyro rad/s, acc m/s^2; "
+         "no noise model stated)")
+    echo(f"groundtruth   optical motion capture (opt_quat, ENU, aligned to the IMU by the dataset): "
+         f"{int(trial.valid.sum())} of {n} samples valid ({n - int(trial.valid.sum())} occluded)")
+    echo(f"scored        {int(trial.movement.sum())} movement samples ({trial.movement.sum() / trial.rate_hz:.1f} s), "
+         f"{len(trial.scored_t_ns)} of them with a valid reference: BROAD's inclination RMSE is over these")
+    echo("usable by     gevi imu (roll/pitch against the reference; heading needs the magnetometer, not used)")
+    if trial.info:
+        echo("info          " + trial.info.splitlines()[0] + (" / " + trial.info.splitlines()[2]
+                                                              if len(trial.info.splitlines()) > 2 else ""))
 
 
 def _describe_sequence(seq, path, echo) -> None:

@@ -7,8 +7,17 @@ there is some, next to the gravity-prior filter of :mod:`gevi_cli.inertial.attit
 gyro integration and a fixed-gain complementary filter (both levelled
 from the accelerometer at the start, with the standstill gyro bias; the complementary filter at the
 best time constant of a 1-2-5 grid, chosen on the ground truth, the grid extended past an edge that
-wins).  With no noise model stated, the filter uses the white noise measured at rest.  Units: s, rad
-(printed in deg), m/s^2.
+wins: an oracle row), and VQF 6D online and offline (:mod:`gevi_cli.inertial.vqf_rows`, the field's
+reference).  With no noise model stated, the filter uses the white noise measured at rest.
+
+The reference: a motion-capture ground truth is brought onto the IMU clock and into the IMU frame from
+the angular rates alone (:mod:`gevi_cli.inertial.reference_alignment`) unless it is known to be
+aligned (``align=False``: ``--no-align``, BROAD).  Every row is scored on that same reference,
+interpolated (slerp) at the row's own stamps, over ``scored_t_ns`` when given (BROAD's movement
+samples).  Stamps follow one convention, VQF's and BROAD's: IMU sample ``k`` is the mean rate over
+``(t_k-1, t_k]``, so an output that has integrated sample ``k`` is stamped ``t_k`` (gevi's own filters
+propagate sample ``k`` over ``[t_k, t_k+1)``; their outputs are stamped one sample earlier here).
+Units: s, rad (printed in deg), m/s^2.
 """
 from __future__ import annotations
 
@@ -26,6 +35,7 @@ from gevi_cli.inertial.attitude import (
     run_filter,
 )
 from gevi_cli.inertial.imu_stream import ImuNoise, ImuStream
+from gevi_cli.inertial.reference_alignment import ReferenceAlignment, estimate_alignment
 from gevi_cli.inertial.standstill import (
     GRAVITY,
     StandstillEstimate,
@@ -105,6 +115,8 @@ class ImuReport:
     attitude: object = None  # AttitudeTrack of the velocity-aided filter
     comparison: list = field(default_factory=list)  # (name, (tilt RMSE, roll/pitch RMSE deg, tilt trend deg/min), note)
     complementary_choice: GridChoice | None = None  # the complementary baseline's grid (with ground truth)
+    alignment: ReferenceAlignment | None = None  # how the reference was put on the IMU clock and frame
+    reference_note: str = ""  # one line: which reference the rows are scored on
 
 
 def _standstills(stream: ImuStream) -> list[tuple[int, int]]:
@@ -120,10 +132,14 @@ def _standstills(stream: ImuStream) -> list[tuple[int, int]]:
     return [(a, b) for a, b in out]
 
 
-def imu_report(stream: ImuStream, gt=None, cfg: VelocityAidedConfig = VelocityAidedConfig()) -> ImuReport:
-    """The whole report for ``stream``; ``gt`` an optional gravity-aligned body Trajectory.  The attitude is
+def imu_report(stream: ImuStream, gt=None, cfg: VelocityAidedConfig = VelocityAidedConfig(), *, align: bool = True,
+               scored_t_ns=None) -> ImuReport:
+    """The whole report for ``stream``; ``gt`` an optional gravity-aligned Trajectory of the reference body
+    (mocap markers, or the IMU itself).  The attitude is
     :class:`~gevi_cli.inertial.velocity_aided.VelocityAidedFilter`'s; with ground truth, the gravity-prior
-    filter of :mod:`.attitude` (adaptive and fixed weight), gyro-only and complementary filters are compared."""
+    filter of :mod:`.attitude` (adaptive and fixed weight), gyro-only, complementary and VQF rows are
+    compared on the reference aligned to the IMU (``align``; see the module docstring), over the stamps
+    ``scored_t_ns`` (ns on the IMU clock) when given."""
     t, g, a = stream.t_ns, stream.gyro, stream.acc
     t0 = int(t[0])
     dt = np.diff(t)
@@ -163,7 +179,16 @@ def imu_report(stream: ImuStream, gt=None, cfg: VelocityAidedConfig = VelocityAi
         cfg = replace(cfg, tilt_sigma0=max(cfg.tilt_sigma0, tilt_spread), bias_sigma0=max(cfg.bias_sigma0, bias_spread))
     rep.attitude = VelocityAidedFilter(R0, b_g, noise, stream.dt_nominal, cfg).run(t, g, _in_g(a, start))
     if gt is not None:
-        rep.comparison = _compare(rep, stream, gt, R0, b_g, cfg)
+        if align:
+            rep.alignment = estimate_alignment(t, g - b_g, gt)
+            rep.reference_note = (rep.alignment.describe() if rep.alignment is not None else
+                                  "reference NOT aligned: too little rotation to estimate a clock offset")
+        else:
+            rep.reference_note = "reference used as given (--no-align, or aligned to the IMU by the dataset)"
+        ref = rep.alignment.apply(gt) if rep.alignment is not None else gt
+        if scored_t_ns is not None:
+            rep.reference_note += f"; scored over {len(scored_t_ns)} samples (the dataset's movement phases)"
+        rep.comparison = _compare(rep, stream, TiltReference(ref, scored_t_ns), R0, b_g, cfg)
     return rep
 
 
@@ -233,33 +258,75 @@ def _traj(t_ns, R):
     return Trajectory.from_rotations(np.asarray(t_ns, dtype=np.int64), R, np.zeros((len(t_ns), 3)), frame="body")
 
 
-def _compare(rep: ImuReport, stream: ImuStream, gt, R0, b_g, cfg: VelocityAidedConfig) -> list:
-    from gevi_cli.evaluation.tilt import tilt_errors
+class TiltReference:
+    """The reference attitude (Trajectory, IMU clock and frame), slerp-interpolated at any stamps inside
+    its span and not across its gaps (intervals over 5x its median); ``scored_t_ns``: only these stamps
+    count (None: all)."""
+
+    def __init__(self, gt, scored_t_ns=None):
+        from scipy.spatial.transform import Rotation, Slerp
+
+        self.t_ns = gt.t_ns
+        self._t0 = int(gt.t_ns[0])
+        self._slerp = Slerp((gt.t_ns - self._t0) * 1e-9, Rotation.from_quat(gt.quat_xyzw))
+        self._gap_ns = 5 * float(np.median(np.diff(gt.t_ns))) if len(gt) > 1 else 0.0
+        self.scored = None if scored_t_ns is None else np.asarray(scored_t_ns, dtype=np.int64)
+
+    def tilt(self, t_ns, R):
+        """:class:`~gevi_cli.evaluation.tilt.TiltErrors` of the estimate ``R`` (n, 3, 3) stamped ``t_ns``."""
+        from gevi_cli.evaluation.tilt import tilt_errors
+
+        t = np.asarray(t_ns, dtype=np.int64)
+        ok = (t >= self.t_ns[0]) & (t <= self.t_ns[-1])
+        if self.scored is not None:
+            ok &= np.isin(t, self.scored)
+        i = np.clip(np.searchsorted(self.t_ns, t), 1, len(self.t_ns) - 1)
+        ok &= (self.t_ns[i] - self.t_ns[i - 1]) <= self._gap_ns
+        t = t[ok]
+        R_ref = self._slerp((t - self._t0) * 1e-9).as_matrix()
+        return tilt_errors(_traj(t, np.asarray(R)[ok]), _traj(t, R_ref), max_diff_s=1e-7)
+
+
+def held_back(t_out, t_samples) -> np.ndarray:
+    """Stamps of outputs that integrated the samples before ``t_out`` (gevi's filters: sample ``k`` over
+    ``[t_k, t_k+1)``), in the report's convention: the sample before (-1 for the first)."""
+    i = np.searchsorted(t_samples, t_out)
+    return np.where(i > 0, t_samples[np.maximum(i - 1, 0)], -1)
+
+
+def _compare(rep: ImuReport, stream: ImuStream, ref: TiltReference, R0, b_g, cfg: VelocityAidedConfig) -> list:
+    from gevi_cli.inertial.vqf_rows import vqf_attitude, vqf_version
 
     t, g, a = stream.t_ns, stream.gyro, stream.acc
 
-    def tilt_stats(t_ns, R, max_diff):  # (tilt RMSE, roll/pitch RMSE, trend)
-        te = tilt_errors(_traj(t_ns, R), gt, max_diff_s=max_diff)
+    def tilt_stats(t_ns, R, forward_hold=True):  # (tilt RMSE, roll/pitch RMSE, trend)
+        te = ref.tilt(held_back(t_ns, t) if forward_hold else t_ns, R)
+        if len(te.t_ns) == 0:
+            return float("nan"), float("nan"), float("nan")
         return te.rmse_deg, te.roll_pitch_rmse_deg, te.trend_deg_per_min(int(te.t_ns[0]))
 
-    half = 0.51 / cfg.update_hz  # every ground-truth stamp finds a filter output
-    rows = [("velocity-aided filter (gevi imu)", tilt_stats(rep.attitude.t_ns, rep.attitude.R_WI, half),
+    rows = [("velocity-aided filter (gevi imu), causal", tilt_stats(rep.attitude.t_ns, rep.attitude.R_WI),
              "online gyro bias and scale; gravity weighted by the measured acceleration; bounded velocity")]
     for adaptive, name, note in ((True, "gravity-prior filter, adaptive weight", "adaptive Sigma_imu (GeVI --no-fusion)"),
                                  (False, "gravity-prior filter, fixed weight", "Sigma = noise floor")):
         old = GravityAttitudeFilter(R0, b_g, rep.noise_used, stream.dt_nominal, AttitudeFilterConfig(adaptive=adaptive))
         trk = run_filter(old, t, g, a)
-        rows.append((name, tilt_stats(trk.t_ns, trk.R_WI, 0.51 / old.cfg.update_hz), note))
-    near = 0.51 * stream.dt_nominal  # per-sample outputs
-    rows.append(("gyro-only integration", tilt_stats(t, gyro_only(R0, b_g, t, g), near), "standstill gyro bias"))
+        rows.append((name + ", causal", tilt_stats(trk.t_ns, trk.R_WI), note))
+    rows.append(("gyro-only integration", tilt_stats(t, gyro_only(R0, b_g, t, g)), "standstill gyro bias"))
 
     def scores(taus):
-        return [tilt_stats(t, level_rotations(gb), near) for gb in complementary_bank(R0, b_g, t, g, a, taus)]
+        return [tilt_stats(t, level_rotations(gb)) for gb in complementary_bank(R0, b_g, t, g, a, taus)]
 
     ch = best_on_grid(COMPLEMENTARY_TAUS_S, scores, min_tau=stream.dt_nominal)
     lo, hi = ch.tried[0][0], ch.tried[-1][0]
     edge = ", AT THE GRID'S EDGE" if ch.at_edge else ""
-    rows.append(("complementary filter, fixed gain", ch.score,
-                 f"time constant {ch.best:g} s, best of {len(ch.tried)} ({lo:g}-{hi:g} s, 1-2-5){edge}"))
+    rows.append(("complementary filter, fixed gain (oracle)", ch.score,
+                 f"time constant {ch.best:g} s chosen on the ground truth, best of {len(ch.tried)} ({lo:g}-{hi:g} s, "
+                 f"1-2-5){edge}"))
     rep.complementary_choice = ch
+    v = vqf_version()
+    for offline, name, note in ((False, f"VQF 6D online (vqf {v}), causal", "vqf.VQF, default parameters"),
+                                (True, f"VQF 6D offline (vqf {v}), offline", "vqf.offlineVQF, default parameters")):
+        rows.append((name, tilt_stats(t, vqf_attitude(g, a, stream.dt_nominal, offline), forward_hold=False),
+                     note + f"; sample period {stream.dt_nominal * 1e3:.4g} ms"))
     return rows

@@ -6,4 +6,6 @@ samples between frames, specific force and gyro increments per frame interval.
 ``attitude``: the IMU-only gravity-prior roll/pitch filter (GeVI's ``fusion.mode = 4dof``) and the
 baselines of `gevi imu` (gyro-only, complementary filters by time constant).
 ``velocity_aided``: `gevi imu`'s roll/pitch filter (gyro bias and scale, bounded velocity).
+``reference_alignment``: a mocap reference put on the IMU clock and frame from the angular rates.
+``vqf_rows``: VQF 6D online and offline (the ``vqf`` package), `gevi imu`'s reference rows.
 """

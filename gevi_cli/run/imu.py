@@ -9,7 +9,9 @@ from gevi_cli.errors import GeviError
 
 
 def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind, groundtruth, calib, imu_calib, topics,
-                   cameras, imu_stride: int = 1, echo=print) -> Path:
+                   cameras, imu_stride: int = 1, align: bool = True, echo=print) -> Path:
+    """`gevi imu`: ``align`` False (``--no-align``) scores on the ground truth as given; a BROAD trial's
+    reference is aligned by its authors and is never re-aligned."""
     from gevi_cli.datasets import open_sequence
     from gevi_cli.datasets.registry import sequence_kwargs
     from gevi_cli.evaluation.imu_report import imu_report
@@ -23,7 +25,13 @@ def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind,
     from gevi_cli.datasets.registry import detect_kind
 
     warn = lambda m: echo(f"gevi: warning: {m}", err=True)  # noqa: E731
-    if kind is None and is_imu_only_euroc(path):
+    from gevi_cli.datasets.broad import is_broad_mat
+
+    if kind is None and is_broad_mat(path):
+        from gevi_cli.datasets.broad import BroadTrial
+
+        seq = BroadTrial(path)
+    elif kind is None and is_imu_only_euroc(path):
         from gevi_cli.datasets.euroc_imu import EurocImu
 
         seq = EurocImu(path, groundtruth=groundtruth)
@@ -47,7 +55,10 @@ def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind,
     if gt is not None and gt.frame not in ("body", "unknown"):
         warn(f"ground truth is in the {gt.frame} frame, not the body (IMU) frame: roll/pitch not compared")
         gt = None
-    rep = imu_report(stream, gt)
+    scored = getattr(seq, "scored_t_ns", None)  # BROAD: the movement samples
+    if scored is not None and imu_stride > 1:
+        scored = scored[np.isin(scored, stream.t_ns)]
+    rep = imu_report(stream, gt, align=align and not getattr(seq, "reference_aligned", False), scored_t_ns=scored)
     if stream.noise_missing:
         warn(f"{path} (IMU): {rep.noise_note}")
     run_dir = make_run_dir(out, Path(results_root), "imu", seq.name + (f"_stride{imu_stride}" if imu_stride > 1 else ""))
@@ -103,13 +114,24 @@ def summary_lines(rep, stream) -> list[str]:
         lines.append(f"flag: {f}")
     if rep.comparison:
         lines.append("")
+        lines.append(rep.reference_note)
         lines.append("| roll/pitch against ground truth | tilt RMSE [deg] | roll, pitch RMSE [deg] | tilt trend [deg/min] "
                      "| note |")
         lines.append("|---|---|---|---|---|")
         lines += [f"| {n} | {v[0]:.3f} | {v[1]:.3f} | {v[2]:+.3f} | {note} |" for n, v, note in rep.comparison]
-        lines.append("(tilt = angle between estimated and true gravity direction in the body frame; roll, pitch = RMS "
-                     "of both Euler-angle differences, amplified near pitch +-90 deg; trend = least-squares slope of "
-                     "the tilt RMSE over 5 s windows; no alignment)")
+        lines.append("(tilt = angle between estimated and true gravity direction in the body frame, BROAD's "
+                     "inclination error; roll, pitch = RMS of both Euler-angle differences, amplified near pitch "
+                     "+-90 deg; trend = least-squares slope of the tilt RMSE over 5 s windows; the reference "
+                     "interpolated at each row's stamps, IMU sample k = the rate over (t_k-1, t_k]; causal: uses "
+                     "no later sample; offline: the whole recording; oracle: chosen on the ground truth)")
+        from gevi_cli.inertial.vqf_rows import default_params
+
+        p = default_params()
+        lines.append("(VQF parameters, the package's defaults: " + ", ".join(
+            f"{k} {p[k]}" for k in ("tauAcc", "motionBiasEstEnabled", "restBiasEstEnabled", "biasSigmaInit",
+                                    "biasForgettingTime", "biasClip", "biasSigmaMotion", "biasVerticalForgettingFactor",
+                                    "biasSigmaRest", "restMinT", "restFilterTau", "restThGyr", "restThAcc") if k in p)
+                     + "; tau in s, bias sigmas and clip in deg/s)")
     return lines
 
 

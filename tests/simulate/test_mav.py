@@ -70,10 +70,10 @@ def test_vibration_render_end_to_end(tmp_path, capsys):
     code, out, err = run_cli(["imu", seq, "-o", tmp_path / "imu", "--no-plots"], capsys)
     assert code == 0, err
     rows = _rows(out)
-    ours = rows["velocity-aided filter (gevi imu)"][0]
+    ours = rows["velocity-aided filter (gevi imu), causal"][0]
     assert ours < 2.5
-    assert ours < rows["gyro-only integration"][0] and ours < rows["gravity-prior filter, fixed weight"][0]
-    assert "EDGE" not in rows["complementary filter, fixed gain"][1]
+    assert ours < rows["gyro-only integration"][0] and ours < rows["gravity-prior filter, fixed weight, causal"][0]
+    assert "EDGE" not in rows["complementary filter, fixed gain (oracle)"][1]
     assert "50.0 Hz" in out and "noise model: as stated by the dataset" in out
     assert "standstill (IMU at rest, s): 0.0-8.0" in out
     states = (tmp_path / "imu" / "imu_states.csv").read_text().splitlines()
