@@ -47,6 +47,8 @@ class TriangulationConfig:
     fill_points: int = opt(100, "a keyframe with fewer points inside the far gate (max_depth_m, min_disparity_px) "
                                 "keeps the points beyond it too (0: never)")
     min_points: int = opt(20, "a keyframe with fewer triangulated points cannot be tracked against")
+    self_calibrate: bool = opt(True, "estimate the stereo pair's disparity offset from the tracked frames' two-view "
+                                     "geometry and add it to the keyframes' disparities")
 
 
 @dataclass

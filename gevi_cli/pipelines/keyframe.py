@@ -37,6 +37,7 @@ class Keyframe:
     cov_unit: np.ndarray
     stereo_left: est.ImageObs
     stereo_right: est.ImageObs
+    disparity_offset_px: float = 0.0  # added to every measured disparity (pipelines.disparity_offset)
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -44,18 +45,23 @@ class Keyframe:
 
 def make_keyframe(index: int, t_ns: int, T_w_k: np.ndarray, stereo: StereoObs, camera: RectifiedStereo,
                   min_depth_m: float, max_depth_m: float, min_disparity_px: float = 0.0,
-                  fill_points: int = 0, sigma_px: float = 0.0) -> Keyframe:
+                  fill_points: int = 0, sigma_px: float = 0.0, disparity_offset_px: float = 0.0) -> Keyframe:
     """Triangulate ``stereo`` (spec 4) and keep the points inside the depth gate and with at least
     ``min_disparity_px`` of disparity.  When fewer than ``fill_points`` pass, the points beyond that
     far gate are kept too (ORB-SLAM's stereo keyframes take far points while they have fewer than 100
     near ones), so that a scene whose texture is all far away (a highway, open water) still has points
     to track; their covariance carries their depth uncertainty.  A filling point's disparity must
     differ from zero by :data:`FILL_SIGMAS` standard deviations of a disparity, ``sqrt(2) sigma_px``
-    (two noisy pixels; ``sigma_px`` the image noise std, px): nearer to zero its depth is unbounded."""
+    (two noisy pixels; ``sigma_px`` the image noise std, px): nearer to zero its depth is unbounded.
+    ``disparity_offset_px``: the pair's estimated disparity offset, added to every disparity (the right
+    pixels moved left by it) before anything else, so the points and the BA's right observations agree."""
     ids = np.asarray(stereo.ids, dtype=np.int64)
     z = camera.normalize(stereo.uv_left)
-    y = camera.normalize(stereo.uv_right)
-    disparity = np.asarray(stereo.disparity, dtype=np.float64)
+    uv_right = np.asarray(stereo.uv_right, dtype=np.float64)
+    if disparity_offset_px:
+        uv_right = uv_right - np.array([disparity_offset_px, 0.0])
+    y = camera.normalize(uv_right)
+    disparity = np.asarray(stereo.disparity, dtype=np.float64) + disparity_offset_px
     depth = camera.depth_from_disparity(disparity)
     keep = (depth >= min_depth_m) & (depth <= max_depth_m) & np.isfinite(depth)
     keep &= disparity >= min_disparity_px
@@ -70,4 +76,4 @@ def make_keyframe(index: int, t_ns: int, T_w_k: np.ndarray, stereo: StereoObs, c
     else:
         p, cov_unit = np.empty((0, 3)), np.empty((0, 3, 3))
     return Keyframe(index, t_ns, np.asarray(T_w_k, dtype=np.float64), ids[keep], z[keep], y[keep], p, cov_unit,
-                    est.ImageObs(ids, z), est.ImageObs(ids, y))
+                    est.ImageObs(ids, z), est.ImageObs(ids, y), float(disparity_offset_px))

@@ -23,6 +23,7 @@ from gevi_cli import estimators as est
 from gevi_cli.frontend import FrontEnd, Prediction
 from gevi_cli.geometry import invert_pose, orthonormal_pose
 from gevi_cli.pipelines.config import OdometryConfig
+from gevi_cli.pipelines.disparity_offset import DisparityOffset
 from gevi_cli.pipelines.keyframe import Keyframe, make_keyframe
 from gevi_cli.pipelines.local_ba import WindowFrame, window_ba
 from gevi_cli.pipelines.types import BRIDGED, OK, FrameResult
@@ -82,6 +83,7 @@ class KeyframeOdometry:
         self.fallbacks = 0  # frames whose 6-DOF pose step started from SQPnP instead of Bias-Eli
         self.reacquired = 0  # frames tracked only after re-acquiring the keyframe's features by descriptor
         self._moving = False  # a step has been tracked: self.velocity is a measured motion
+        self.disparity_offset = DisparityOffset() if cfg.triangulation.self_calibrate else None
 
     def frame_rng(self) -> np.random.Generator:
         """The generator for this frame's RANSAC draws, positioned at (seed, frame index)."""
@@ -328,6 +330,9 @@ class KeyframeOdometry:
         timings["noise"] = t2 - t1
         T_ck = self.estimate_T_ck(m, frame)
         timings["pose"] = time.perf_counter() - t2
+        if self.disparity_offset is not None:
+            raw = (m.z[:, 0] - m.y[:, 0]) * self.camera.fx - self.kf.disparity_offset_px
+            self.disparity_offset.observe(m.z, m.q, raw, T_ck)
         disp_px = float(np.mean(np.linalg.norm(m.q - m.z, axis=1))) * self.camera.f
         self._last = (m.p, m.q)
         return T_ck, n_match, len(m.ids), disp_px
@@ -350,7 +355,8 @@ class KeyframeOdometry:
                         for k, v in self.frontend.timings.items()})
         new = make_keyframe(res.index, res.t_ns, res.T_w_c, stereo, self.camera, cfg.triangulation.min_depth_m,
                             cfg.triangulation.max_depth_m, cfg.triangulation.min_disparity_px,
-                            cfg.triangulation.fill_points, float(np.sqrt(self.sigma2) * self.camera.f))
+                            cfg.triangulation.fill_points, float(np.sqrt(self.sigma2) * self.camera.f),
+                            self.disparity_offset.value if self.disparity_offset is not None else 0.0)
         if cfg.noise.method == "stereo" and len(new) >= 9:
             try:
                 self._set_sigma2(est.sigma2_stereo(new.z, new.y, self.camera.R_rl, self.camera.t_rl))
