@@ -9,8 +9,8 @@ direction, the points' inverse depths ``1 / Z_mono`` are the true ones times an 
 stereo disparities lie on the line ``d = k / Z_mono - delta``.  The intercept is the offset.
 
 Each tracked step gives one robust line fit (Huber IRLS); a step counts when its intercept is well
-determined (standard error below :data:`MAX_STEP_SE_PX`: the points span the inverse depths down to the
-far ones, so the intercept is not an extrapolation).  The estimate is the median of the counted steps
+determined: its points reach far enough that zero disparity is not an extrapolation
+(:data:`MAX_EXTRAPOLATION`) and the intercept's standard error is below :data:`MAX_STEP_SE_PX`.  The estimate is the median of the counted steps
 once there are :data:`MIN_STEPS` of them and it reaches :data:`MIN_OFFSET_PX`, else 0.  Frames: keyframe-left normalized coordinates,
 disparities in pixels of the rectified images.
 """
@@ -28,6 +28,12 @@ MIN_POINTS = 20
 
 MAX_STEP_SE_PX = 0.25
 """A step counts when the standard error of its intercept is below this (px)."""
+
+MAX_EXTRAPOLATION = 1.0
+"""A step counts only when its points reach within this many spans of zero disparity: the 10th
+percentile of their disparities at most this times the 10-90 % spread.  The intercept is read at zero
+disparity; from a pool floor at 45-57 px it is an extrapolation of six spans, where any error of the
+line's slope becomes an offset (a pool-easy render, exact rectification, read -0.4 to -0.6 px)."""
 
 MIN_STEPS = 5
 """The estimate is 0 until this many steps have counted."""
@@ -98,6 +104,9 @@ class DisparityOffset:
         inv, parallax = two_view_inverse_depth(z, q, T_ck[:3, :3], t)
         ok = np.isfinite(inv) & (parallax >= MIN_PARALLAX_DEG) & np.isfinite(raw_disparity_px)
         if ok.sum() < MIN_POINTS:
+            return
+        d10, d90 = np.percentile(raw_disparity_px[ok], [10, 90])
+        if d10 > MAX_EXTRAPOLATION * (d90 - d10):
             return
         delta, se = step_offset(inv[ok], raw_disparity_px[ok])
         if np.isfinite(delta) and se < MAX_STEP_SE_PX:
