@@ -6,6 +6,8 @@ from typing import Protocol
 
 import numpy as np
 
+from gevi_cli.pipelines.disparity_offset import DisparityOffset
+
 OK, BRIDGED, LOST = "ok", "bridged", "lost"
 #: GeVI: the frame could not be tracked visually, its pose comes from the IMU alone (preintegration
 #: from the last pose and velocity, or "at rest" during a standstill the IMU shows)
@@ -51,7 +53,8 @@ class Odometry(Protocol):
     ``world_is_cam0``: the world is the first rectified cam0 (a stereo odometry) rather than a frame of
     the odometry's own (GeVI: gravity-aligned); ``state_columns`` / ``state_file``: the per-frame state
     each ``FrameResult.extra`` holds and the run-folder file it goes to (no columns: none);
-    ``fallbacks``: frames whose pose step started from SQPnP.  ``finish`` makes the held poses final
+    ``fallbacks``: frames whose pose step started from SQPnP; ``disparity_offset``: the stereo self-calibration
+(None: off).  ``finish`` makes the held poses final
     (``closing_ba``: the sequence ended normally), ``release_online`` hands over held online poses,
     ``summary`` is what ``status.json`` records of the odometry's own state (``imu``)."""
 
@@ -59,6 +62,7 @@ class Odometry(Protocol):
     state_columns: tuple
     state_file: str
     fallbacks: int
+    disparity_offset: DisparityOffset | None
 
     def track(self, frame) -> FrameResult: ...
 

@@ -158,6 +158,9 @@ def run_odometry(source, odometry: Odometry, status: RunStatus, sinks, *, T_B_C0
         status.imu = odometry.summary()
         status.elapsed_s = time.perf_counter() - t_run
         status.pose_fallbacks = int(odometry.fallbacks)
+        if odometry.disparity_offset is not None:
+            status.disparity_offset_px = odometry.disparity_offset.value
+            status.disparity_offset_steps = len(odometry.disparity_offset.steps)
         for sink in sinks:
             sink.close(status)
     return RunOutcome(status, 0 if status.state == "ok" else 3)

@@ -75,6 +75,9 @@ class RunStatus:
     frames_tracked: int = 0
     keyframes: int = 0
     pose_fallbacks: int = 0  # frames whose pose step started from SQPnP (coplanar points)
+    # the stereo pair's disparity offset as self-calibrated (px; 0: none corrected) and the steps it rests on
+    disparity_offset_px: float = 0.0
+    disparity_offset_steps: int = 0
     lost_intervals: list = field(default_factory=list)  # {"start_s", "end_s", "frames", "first_index", "reason"}
     bridged_frames: list = field(default_factory=list)  # frame indices bridged at constant velocity
     inertial_frames: list = field(default_factory=list)  # GeVI: not tracked visually, carried by the IMU alone
