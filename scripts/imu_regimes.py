@@ -4,7 +4,8 @@ Rows: euroc_micro's real IMU at 200, 100 and 50 Hz (``--imu-stride 1/2/4``), ``g
 renders (seeds 1-3 at 50 and 200 Hz) and, for calm underwater-like motion, ``gevi simulate pool-easy
 --imu-only --duration 60`` (seeds 1-3, 200 Hz).  Each row is one ``gevi imu`` run; the table gives the tilt
 RMSE of the filters it compares (on the reference aligned to the IMU from the angular rates, printed),
-the complementary filter's chosen time constant and the VQF reference rows.
+the complementary filter's chosen time constant, the VQF reference rows and gevi's standstill-compensated
+VQF rows (causal and offline).
 
     python scripts/imu_regimes.py [--work DIR] [--data ../shared/data] [--no-noise-model]
 
@@ -62,8 +63,8 @@ def main() -> None:
             gevi("simulate", "pool-easy", out, "--imu-only", "--duration", 60, "--seed", seed, *extra)
         jobs.append((f"pool-easy seed {seed} 200 Hz", [out]))
     print("| sequence | velocity-aided (gevi imu) | gravity prior, adaptive | best complementary (oracle) | its time "
-          "constant | VQF online | VQF offline | reference alignment |")
-    print("|---|---|---|---|---|---|---|---|")
+          "constant | VQF online | VQF offline | compensated VQF online | compensated VQF offline | reference alignment |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name, args in jobs:
         out = gevi("imu", *args, "-o", work / "imu" / name.replace(" ", "_"), "--no-plots")
         r = rows_of(out)
@@ -72,12 +73,13 @@ def main() -> None:
         vqf = [v for k, v in r.items() if k.startswith("VQF 6D online")][0][0], \
             [v for k, v in r.items() if k.startswith("VQF 6D offline")][0][0]
         ours = r["velocity-aided filter (gevi imu), causal"][0]
+        cvqf = [v[0] for k, v in r.items() if k.startswith("standstill-compensated VQF")]
         comp, note = r["complementary filter, fixed gain (oracle)"]
         tau = re.search(r"time constant ([0-9.e+-]+) s", note).group(1)
         edge = " (GRID EDGE)" if "EDGE" in note else ""
         mark = "**" if ours <= comp else ""
         print(f"| {name} | {mark}{ours:.2f}{mark} | {r['gravity-prior filter, adaptive weight, causal'][0]:.2f} | {comp:.2f} | "
-              f"{tau} s{edge} | {vqf[0]:.2f} | {vqf[1]:.2f} | {al} |", flush=True)
+              f"{tau} s{edge} | {vqf[0]:.2f} | {vqf[1]:.2f} | {cvqf[0]:.2f} | {cvqf[1]:.2f} | {al} |", flush=True)
 
 
 if __name__ == "__main__":

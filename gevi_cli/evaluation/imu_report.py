@@ -44,6 +44,7 @@ from gevi_cli.inertial.standstill import (
     tilt_from_specific_force,
 )
 from gevi_cli.inertial.velocity_aided import VelocityAidedConfig, VelocityAidedFilter
+from gevi_cli.inertial.vqf_rows import compensated_vqf_attitude
 
 #: standstill detection on the IMU alone (no images here): windows of this length (s) ...
 STILL_WINDOW_S = 0.5
@@ -112,7 +113,10 @@ class ImuReport:
     noise_used: ImuNoise | None = None  # what the filter ran with
     noise_note: str = ""  # one line: where noise_used comes from
     flags: list = field(default_factory=list)
-    attitude: object = None  # AttitudeTrack of the velocity-aided filter
+    attitude: object = None  # AttitudeTrack of the velocity-aided filter (causal)
+    # R_WI (n, 3, 3) of VQF 6D offline on the standstill-compensated gyro, one per IMU sample, stamped t_k
+    # (sample k = the rate over (t_k-1, t_k]): the offline attitude gevi imu writes
+    attitude_offline: np.ndarray | None = None
     comparison: list = field(default_factory=list)  # (name, (tilt RMSE, roll/pitch RMSE deg, tilt trend deg/min), note)
     complementary_choice: GridChoice | None = None  # the complementary baseline's grid (with ground truth)
     alignment: ReferenceAlignment | None = None  # how the reference was put on the IMU clock and frame
@@ -178,6 +182,7 @@ def imu_report(stream: ImuStream, gt=None, cfg: VelocityAidedConfig = VelocityAi
         tilt_spread, bias_spread = _start_spread(stream, still[0][1])
         cfg = replace(cfg, tilt_sigma0=max(cfg.tilt_sigma0, tilt_spread), bias_sigma0=max(cfg.bias_sigma0, bias_spread))
     rep.attitude = VelocityAidedFilter(R0, b_g, noise, stream.dt_nominal, cfg).run(t, g, _in_g(a, start))
+    rep.attitude_offline = compensated_vqf_attitude(g, a, stream.dt_nominal, b_g, offline=True)
     if gt is not None:
         if align:
             rep.alignment = estimate_alignment(t, g - b_g, gt)
@@ -329,4 +334,9 @@ def _compare(rep: ImuReport, stream: ImuStream, ref: TiltReference, R0, b_g, cfg
                                 (True, f"VQF 6D offline (vqf {v}), offline", "vqf.offlineVQF, default parameters")):
         rows.append((name, tilt_stats(t, vqf_attitude(g, a, stream.dt_nominal, offline), forward_hold=False),
                      note + f"; sample period {stream.dt_nominal * 1e3:.4g} ms"))
+    comp = "VQF 6D on the gyro minus the standstill bias, biasSigmaInit 0.1, biasSigmaMotion 0.02 deg/s, biasForgettingTime 1000 s"
+    rows.append(("standstill-compensated VQF online (gevi imu), causal",
+                 tilt_stats(t, compensated_vqf_attitude(g, a, stream.dt_nominal, b_g), forward_hold=False), comp))
+    rows.append(("standstill-compensated VQF offline (gevi imu attitude_offline.tum), offline",
+                 tilt_stats(t, rep.attitude_offline, forward_hold=False), comp))
     return rows
