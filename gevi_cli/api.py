@@ -57,7 +57,15 @@ def run(sequence, method: str | None = None, config: str | None = None, sets=(),
     dataset folder, bag or track export) and return the :class:`RunResult`.  ``config``: a YAML of
     overrides; ``sets``: ``"KEY=VALUE"`` strings (``gevi run --set``); ``stride``: every K-th frame;
     ``sinks``: more :class:`~gevi_cli.run.sinks.RunSink` objects to hand the output to as it is made.
-    Raises :class:`gevi_cli.errors.GeviError` for unusable input (one line, as the CLI prints it)."""
+    Raises :class:`gevi_cli.errors.GeviError` for unusable input (one line, as the CLI prints it).
+    Runs with one BLAS/OpenCV thread, as ``gevi run`` (the caller's counts are put back on return)."""
+    from gevi_cli.run.threads import one_thread
+
+    with one_thread():
+        return _run(sequence, method, config, sets, stride, start, max_frames, seed, groundtruth, sinks, progress)
+
+
+def _run(sequence, method, config, sets, stride, start, max_frames, seed, groundtruth, sinks, progress) -> RunResult:
     import pandas as pd
 
     from gevi_cli.run.driver import run_odometry

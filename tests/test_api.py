@@ -38,13 +38,84 @@ def test_api_is_what_the_cli_writes(tmp_path, capsys):
     assert code == 0, err
     written = read_trajectory(tmp_path / "run" / "traj_body.tum", frame="body")
     assert np.array_equal(written.t_ns, result.trajectory.t_ns)
-    np.testing.assert_allclose(written.positions, result.trajectory.positions, rtol=0, atol=1e-9)
+    assert np.array_equal(written.positions, result.trajectory.positions)
+    assert np.array_equal(written.quat_wxyz, result.trajectory.quat_wxyz)
     frames = (tmp_path / "run" / "frames.csv").read_text().splitlines()[1:]
     assert [r.split(",")[2] for r in frames] == result.frames.status.tolist()
     status = json.loads((tmp_path / "run" / "status.json").read_text())
     pair = evaluate(gt, tmp_path / "run" / "traj_body.tum", align="se3")
     assert pair.ate.trans_rmse == status["evaluation"]["ate_m"]
     assert abs(result.evaluation.ate.trans_rmse - status["evaluation"]["ate_m"]) < 1e-9
+
+
+class _ThreadProbe:
+    """A run sink that records, at every frame, OpenCV's thread count and each loaded BLAS/OpenMP library's."""
+
+    def __init__(self):
+        self.cv2, self.blas = [], []
+
+    def frame(self, index, res, total_s):
+        import cv2
+        from threadpoolctl import threadpool_info
+
+        self.cv2.append(cv2.getNumThreads())
+        self.blas.append([lib["num_threads"] for lib in threadpool_info()])
+
+    def final(self, t_ns, T_cam0, T_body):
+        pass
+
+    def online(self, t_ns, T_body):
+        pass
+
+    def status(self, status):
+        pass
+
+    def close(self, status):
+        pass
+
+
+def test_api_runs_on_one_thread_and_gives_the_caller_its_threads_back(pool_render):
+    """While api.run computes, OpenCV and every loaded BLAS (numpy's, scipy's, OpenCV's own) use one thread, as
+    in `gevi run`, whatever the caller had set; on return the caller's counts are back."""
+    import cv2
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from gevi_cli.api import run
+
+    before_cv2 = cv2.getNumThreads()
+    probe = _ThreadProbe()
+    with threadpool_limits(limits=2):
+        cv2.setNumThreads(2)
+        callers = (cv2.getNumThreads(), [lib["num_threads"] for lib in threadpool_info()])
+        try:
+            result = run(pool_render, method="cfo", max_frames=25, sinks=[probe])
+            after = (cv2.getNumThreads(), [lib["num_threads"] for lib in threadpool_info()])
+        finally:
+            cv2.setNumThreads(before_cv2)
+    assert len(result.frames) == 25 == len(probe.cv2)
+    assert set(probe.cv2) == {1}
+    assert all(len(libs) >= 1 and set(libs) == {1} for libs in probe.blas)
+    assert after == callers
+
+
+def test_api_is_gevi_run_to_the_bit(pool_render, tmp_path, capsys):
+    """GeVI on the small pool render: api.run's final, online and cam0 poses are the run folder's, bit for bit
+    (one thread in both: the same arithmetic)."""
+    from gevi_cli.api import run
+    from gevi_cli.trajectory import read_trajectory
+
+    result = run(pool_render, method="gevi", max_frames=40)
+    code, _, err = run_cli(["run", pool_render, "--method", "gevi", "--max-frames", "40", "-q", "-o", tmp_path / "run"],
+                           capsys)
+    assert code == 0, err
+    for name, frame, mine in [("traj_body.tum", "body", result.trajectory),
+                              ("traj_cam0.tum", "cam0", result.trajectory_cam0),
+                              ("traj_online_body.tum", "body", result.online)]:
+        written = read_trajectory(tmp_path / "run" / name, frame=frame)
+        assert len(written) == len(mine) > 0, name
+        assert np.array_equal(written.t_ns, mine.t_ns), name
+        assert np.array_equal(written.positions, mine.positions), name
+        assert np.array_equal(written.quat_wxyz, mine.quat_wxyz), name
 
 
 def _written(metrics_json) -> dict:

@@ -1,9 +1,8 @@
 """The per-kind configurations are package data: found inside the installed package, whatever the install."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import tomllib
+from pathlib import Path
 
 import gevi_cli
 from gevi_cli.run import session

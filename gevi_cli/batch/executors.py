@@ -4,7 +4,7 @@ finish; the results tree is the same whichever is used (each run writes only its
 """
 from __future__ import annotations
 
-from gevi_cli.batch.worker import pin_threads, run_one
+from gevi_cli.batch.worker import run_one
 from gevi_cli.errors import GeviError
 
 
@@ -16,14 +16,14 @@ def run_serial(specs):
 
 def run_local(specs, jobs: int):
     """``jobs`` spawned worker processes: spawn, not fork, so that no BLAS/OpenCV thread pool or lock
-    of the parent is inherited, and the thread pinning happens before numpy is imported."""
+    of the parent is inherited (each run pins its own threads: :func:`gevi_cli.run.threads.one_thread`)."""
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     if jobs <= 1:
         yield from run_serial(specs)
         return
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn"), initializer=pin_threads) as pool:
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=mp.get_context("spawn")) as pool:
         futures = {pool.submit(run_one, s): s for s in specs}
         try:
             for fut in as_completed(futures):
@@ -36,7 +36,7 @@ def run_local(specs, jobs: int):
 
 def run_dask(specs, scheduler: str):
     """On the dask.distributed cluster at ``scheduler`` (workers need gevi importable; each task pins
-    its threads in :func:`run_one`).  ``pure=False``: a re-run of the same spec must run again."""
+    its threads in :func:`gevi_cli.run.session.execute`).  ``pure=False``: a re-run of the same spec must run again."""
     try:
         from distributed import Client, as_completed
     except ImportError:

@@ -13,20 +13,6 @@ import time
 from pathlib import Path
 
 MARKER = "done.json"
-THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
-
-
-def pin_threads() -> None:
-    """One BLAS/OpenMP/OpenCV thread: bit-identical results whatever runs next to us, and fair timing.
-
-    The environment variables only act before numpy is first imported (a spawned process or a fresh
-    dask worker); cv2.setNumThreads acts at once.
-    """
-    for var in THREAD_VARS:
-        os.environ[var] = "1"
-    import cv2
-
-    cv2.setNumThreads(1)
 
 
 def read_marker(run_dir) -> dict | None:
@@ -57,9 +43,9 @@ def run_one(spec) -> dict:
     """Run ``spec`` (a :class:`~gevi_cli.batch.plan.RunSpec`) into its folder; return its marker.
 
     Any exception becomes state ``crashed`` with its message; KeyboardInterrupt is not caught (the
-    folder then has no marker and the run is redone on resume).
+    folder then has no marker and the run is redone on resume).  ``execute`` runs with one BLAS/OpenCV
+    thread (:func:`gevi_cli.run.threads.one_thread`), in whatever process this is.
     """
-    pin_threads()
     from gevi_cli import __version__
     from gevi_cli.errors import GeviError
     from gevi_cli.run.folder import RunStatus, read_status, write_status

@@ -1,12 +1,7 @@
 """`gevi batch CONFIG.yaml`: sequences x methods x trials into one results tree and one report."""
 from __future__ import annotations
 
-import os
-
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")  # before numpy: determinism, fair timing (as gevi run)
-
-import click  # noqa: E402
+import click
 
 EPILOG = """\b
 Examples:
@@ -35,8 +30,10 @@ Config schema, results tree, resume and the report: docs/batch.md.
 def command(config, out, jobs, force, executor, scheduler, sequences, trials):
     """Run every method (and trial) of CONFIG on every sequence, evaluate, and write one report."""
     from gevi_cli.batch.runner import run_batch
+    from gevi_cli.run.threads import one_thread
 
-    code = run_batch(config, out, jobs=jobs, force=force, executor=executor, scheduler=scheduler, echo=click.echo,
-                     sequences=sequences, trials=trials)
+    with one_thread():  # the renders and the evaluation here; each run pins its own (run.session.execute)
+        code = run_batch(config, out, jobs=jobs, force=force, executor=executor, scheduler=scheduler,
+                         echo=click.echo, sequences=sequences, trials=trials)
     if code:
         raise click.exceptions.Exit(code)

@@ -1,14 +1,9 @@
 """`gevi imu SEQUENCE`: the IMU report (what to check before trusting a VIO run)."""
 from __future__ import annotations
 
-import os
+import click
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
-
-import click  # noqa: E402
-
-from gevi_cli.commands.options import add_sequence_options  # noqa: E402
+from gevi_cli.commands.options import add_sequence_options
 
 
 @click.command("imu")
@@ -47,7 +42,9 @@ def command(sequence, out, results_root, imu_time_offset, no_plots, imu_stride, 
       gevi imu ../shared/data/euroc_micro --gt ../shared/data/euroc_micro/groundtruth/V1_01_easy.csv --imu-stride 4
     """
     from gevi_cli.run.imu import run_imu_report
+    from gevi_cli.run.threads import one_thread
 
-    run_imu_report(sequence, out=out, results_root=results_root, imu_time_offset=imu_time_offset, plots=not no_plots,
-                   kind=kind, groundtruth=groundtruth, calib=calib, imu_calib=imu_calib, topics=topics,
-                   cameras=cameras, imu_stride=imu_stride, align=not no_align, echo=click.echo)
+    with one_thread():
+        run_imu_report(sequence, out=out, results_root=results_root, imu_time_offset=imu_time_offset,
+                       plots=not no_plots, kind=kind, groundtruth=groundtruth, calib=calib, imu_calib=imu_calib,
+                       topics=topics, cameras=cameras, imu_stride=imu_stride, align=not no_align, echo=click.echo)

@@ -1,16 +1,10 @@
 """`gevi run SEQUENCE`: odometry from images (or exported tracks) to a trajectory, evaluated."""
 from __future__ import annotations
 
-import os
+import click
 
-# Determinism and fair timing: one BLAS/OpenMP thread (set before numpy is imported).
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
-
-import click  # noqa: E402
-
-from gevi_cli.commands.options import add_sequence_options  # noqa: E402
-from gevi_cli.run.method_options import method_options  # noqa: E402
+from gevi_cli.commands.options import add_sequence_options
+from gevi_cli.run.method_options import method_options
 
 
 @click.command("run")

@@ -1,4 +1,4 @@
-"""The one place gevi imports evo (pinned 1.38.1).
+"""The one place gevi imports evo (1.38.x: pyproject.toml).
 
 evo's *core* (metrics, sync, geometry, lie algebra) and its file reader do not touch matplotlib or the
 user's ``~/.evo``; but ``evo.tools.settings`` -- pulled in by evo's plotting and CLI modules -- creates

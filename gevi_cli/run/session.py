@@ -280,8 +280,15 @@ def _gt_source(req: RunRequest, source):
 
 
 def execute(req: RunRequest, echo=print) -> int:
-    """Run and evaluate; returns the exit status (0 complete, 3 tracking lost)."""
-    import cv2
+    """Run and evaluate; returns the exit status (0 complete, 3 tracking lost).  One BLAS/OpenCV thread
+    throughout (:func:`gevi_cli.run.threads.one_thread`)."""
+    from gevi_cli.run.threads import one_thread
+
+    with one_thread():
+        return _execute(req, echo)
+
+
+def _execute(req: RunRequest, echo) -> int:
     import yaml
 
     from gevi_cli import __version__
@@ -290,7 +297,6 @@ def execute(req: RunRequest, echo=print) -> int:
     from gevi_cli.run.sinks import FolderSink
 
     t_start = time.perf_counter()
-    cv2.setNumThreads(1)
     if req.sequence is None:
         from gevi_cli.simulate.sample import sample_path, sample_sequence
 
