@@ -51,7 +51,7 @@ from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches
 from gevi_cli.pipelines.pose4 import pose4
 from gevi_cli.pipelines.pose6 import converged_limit_px, reprojection_median_px, reverified, tracked_pose6
 from gevi_cli.pipelines.tilt_window import TiltWindow
-from gevi_cli.pipelines.types import INERTIAL, OK
+from gevi_cli.pipelines.types import INERTIAL, OK, WORLD_GRAVITY, WORLD_PROVISIONAL
 from gevi_cli.pipelines.verification import FivePointL1Verification, ThreePointVerification, TrackingFailure
 
 #: how a frame is tracked: before W is known; the GeVI steps; the 6-DOF visual step over an IMU gap.
@@ -80,7 +80,6 @@ class FramePlan:
 
 class GeviOdometry(KeyframeOdometry):
     name = "gevi"
-    world_is_cam0 = False
     state_file = "imu_states.csv"
     state_columns = STATE_COLUMNS
 
@@ -109,10 +108,15 @@ class GeviOdometry(KeyframeOdometry):
         self.gaps: list[dict] = []  # IMU gaps: {"first_index", "last_index", "start_s", "end_s", "frames"}
 
     # ------------------------------------------------------------------------------ main entry
-    def track(self, frame):
+    @property
+    def world(self) -> str:
+        """WORLD_GRAVITY once the initialisation answered; before, WORLD_PROVISIONAL (V: the first cam0)."""
+        return WORLD_GRAVITY if self.start.done else WORLD_PROVISIONAL
+
+    def _track(self, frame):
         t_ns = int(frame.t_ns)
         plan = self.plan = self._plan(t_ns)
-        res = super().track(frame)
+        res = super()._track(frame)
         self.start.note_frame(res)
         self._note_gap(res, plan.mode == VISUAL)
         if not self.start.done:
@@ -149,9 +153,9 @@ class GeviOdometry(KeyframeOdometry):
     def _hold_until_start(self, res) -> None:
         """Before W is known nothing is final and nothing is written: the poses are held in V (the first
         keyframe's rectified cam0) and re-expressed in W when the initialisation answers."""
-        self.pending, res.final = res.final + self.pending, []
+        self.pending, self._final = self._final + self.pending, []
         self.online_held.append((res.index, res.T_w_c.copy()))
-        res.online = []
+        self._online = []
         start = self.start.try_start(res, self.obs)
         if start is not None:
             self._enter_world(res, start)
@@ -252,7 +256,7 @@ class GeviOdometry(KeyframeOdometry):
         T_WV[:3, :3] = start.R_WV
         self.pending = [(i, T_WV @ T) for i, T in self.pending]
         res.T_w_c = T_WV @ res.T_w_c
-        res.online, self.online_held = [(i, T_WV @ T) for i, T in self.online_held], []
+        self._online, self.online_held = [(i, T_WV @ T) for i, T in self.online_held], []
         if self.kf is not None:
             self.kf.T_w_k = T_WV @ self.kf.T_w_k
         if self.T_w_last is not None:
@@ -272,7 +276,7 @@ class GeviOdometry(KeyframeOdometry):
         if self.cfg.fusion.mode == "4dof":
             self._start_attitude_filter(res.t_ns)
         if not self.cfg.ba.enabled:
-            res.final, self.pending = self.pending, []
+            self._final, self.pending = self.pending, []
 
     def _start_attitude_filter(self, t_ns: int) -> None:
         """``fusion.mode = 4dof``: roll/pitch from the IMU alone, the gravity-prior filter run over the rest."""
@@ -324,7 +328,7 @@ class GeviOdometry(KeyframeOdometry):
             Q[:3, :3] = est.exp_so3(step * ((i - i_prev) / span)) @ P[:3, :3]
             return Q
 
-        res.final = [(i, written(i, P)) for i, P in res.final]
+        self._final = [(i, written(i, P)) for i, P in self._final]
         self.pending = [(i, written(i, P)) for i, P in self.pending]
 
     # ------------------------------------------------------------------------------ biases

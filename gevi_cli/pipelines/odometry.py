@@ -26,7 +26,7 @@ from gevi_cli.pipelines.config import OdometryConfig
 from gevi_cli.pipelines.disparity_offset import DisparityOffset
 from gevi_cli.pipelines.keyframe import Keyframe, make_keyframe
 from gevi_cli.pipelines.local_ba import WindowFrame, window_ba
-from gevi_cli.pipelines.types import BRIDGED, OK, FrameResult
+from gevi_cli.pipelines.types import BRIDGED, FINAL, OK, ONLINE, WORLD_FIRST_CAM0, FrameResult, PoseEvent, pose_events
 from gevi_cli.pipelines.verification import TrackingFailure
 
 
@@ -50,7 +50,6 @@ class KeyframeOdometry:
     """Base class; subclasses set ``self.verification`` and implement :meth:`estimate_T_ck`."""
 
     name = "odometry"
-    world_is_cam0 = True  # W = the first keyframe's rectified cam0 (GeVI: a gravity-aligned W)
     state_columns: tuple = ()  # per-frame state in FrameResult.extra (GeVI: the IMU state)
     state_file = "states.csv"
 
@@ -61,7 +60,11 @@ class KeyframeOdometry:
         self.kf: Keyframe | None = None
         self.window: list[WindowFrame] = []
         self.pending: list[tuple[int, np.ndarray]] = []  # (index, T_w_c) not final yet
-        self.online_held: list[tuple[int, np.ndarray]] = []  # online poses not written yet (FrameResult.online)
+        self.online_held: list[tuple[int, np.ndarray]] = []  # online poses held back (GeVI before its world)
+        # what the frame being tracked releases: poses made final, and the online poses to hand out instead
+        # of its own (None: its own), as (index, T_w_c); turned into PoseEvents at the end of track()
+        self._final: list[tuple[int, np.ndarray]] = []
+        self._online: list[tuple[int, np.ndarray]] | None = None
         self.index = -1
         self.sigma2 = (cfg.noise.default_px / self.camera.f) ** 2
         self.sigma2_valid = False
@@ -103,8 +106,30 @@ class KeyframeOdometry:
         raise NotImplementedError
 
     # ------------------------------------------------------------------------------- main entry
+    @property
+    def world(self) -> str:
+        """The world of the poses released now (:data:`~gevi_cli.pipelines.types.WORLD_FIRST_CAM0` here)."""
+        return WORLD_FIRST_CAM0
+
     def track(self, frame) -> FrameResult:
-        """Track one frame; never raises for tracking problems (they become ``bridged`` frames)."""
+        """Track one frame; never raises for tracking problems (they become ``bridged`` frames).  The
+        poses it releases are the result's ``poses`` (its online pose, then those made final)."""
+        self._final, self._online = [], None
+        res = self._track(frame)
+        online = self._online if self._online is not None else [(res.index, res.T_w_c)]
+        res.poses = pose_events(ONLINE, online, self.world) + pose_events(FINAL, self._final, self.world)
+        self._final, self._online = [], None
+        return res
+
+    def close(self, closing_ba: bool = False) -> list[PoseEvent]:
+        """The poses still held, released: the pending ones made final (:meth:`_finish`), then the held
+        online ones.  Call once, after the last frame (or on an interrupt / a crash, ``closing_ba`` False)."""
+        final = self._finish(closing_ba)
+        online, self.online_held = self.online_held, []
+        return pose_events(FINAL, final, self.world) + pose_events(ONLINE, online, self.world)
+
+    def _track(self, frame) -> FrameResult:
+        """:meth:`track` without the release of the poses (subclasses extend this)."""
         self.index += 1
         timings: dict[str, float] = {}
         obs, predicted, topped_up = self._features(frame, timings)
@@ -202,7 +227,7 @@ class KeyframeOdometry:
             self._insert_keyframe(frame, res, timings)
             timings["keyframe"] = time.perf_counter() - t1 - timings.get("ba", 0.0)
         elif not self.cfg.ba.enabled or self.kf is None:
-            res.final, self.pending = self.pending, []
+            self._final, self.pending = self.pending, []
 
     def _remember_motion(self, res: FrameResult) -> None:
         """The last pose and, after a tracked step, the step as the constant-velocity motion; the bridge
@@ -259,12 +284,7 @@ class KeyframeOdometry:
         """What status.json records of the odometry's own state (a stereo odometry: nothing)."""
         return {}
 
-    def release_online(self) -> list[tuple[int, np.ndarray]]:
-        """Online poses still held back (the run ends before they could be re-expressed), as they are."""
-        out, self.online_held = self.online_held, []
-        return out
-
-    def finish(self, closing_ba: bool = False) -> list[tuple[int, np.ndarray]]:
+    def _finish(self, closing_ba: bool = False) -> list[tuple[int, np.ndarray]]:
         """Poses still pending, made final.
 
         ``closing_ba`` (the sequence ended normally): the frames after the last keyframe close their
@@ -281,8 +301,9 @@ class KeyframeOdometry:
                 and self.frontend.keyframe_decision(last[0]) is None  # exported tracks: their own keyframes only
                 and self.window[-1].index == last[1].index and not last[1].keyframe and last[1].status == OK):
             frame, res = last
+            self._final = []
             self._insert_keyframe(frame, res, {})
-            out = res.final
+            out = self._final
         else:
             out = []
         out, self.pending = out + self.pending, []
@@ -368,7 +389,7 @@ class KeyframeOdometry:
             timings["ba"] = time.perf_counter() - t0
             if T_w_new is not None:
                 new.T_w_k = T_w_new
-        res.final, self.pending = self.pending, []
+        self._final, self.pending = self.pending, []
         if len(new) >= cfg.triangulation.min_points:
             self.kf = new
             res.keyframe = True

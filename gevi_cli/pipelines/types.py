@@ -6,6 +6,7 @@ from typing import Protocol
 
 import numpy as np
 
+from gevi_cli.geometry import invert_pose
 from gevi_cli.pipelines.disparity_offset import DisparityOffset
 
 OK, BRIDGED, LOST = "ok", "bridged", "lost"
@@ -14,19 +15,54 @@ OK, BRIDGED, LOST = "ok", "bridged", "lost"
 INERTIAL = "inertial"
 
 
+#: PoseEvent kinds: a pose as known when tracked; a pose that will not change any more (after the local
+#: BA of its window, or at once without BA).  Over a run every frame is released FINAL exactly once, in
+#: frame order (the last ones by ``Odometry.close``): tests/pipelines/test_pose_events.py checks it.
+ONLINE, FINAL = "online", "final"
+
+#: PoseEvent worlds.  WORLD_FIRST_CAM0: the first keyframe's rectified cam0 (a stereo odometry; its
+#: body trajectory is written relative to the first body pose, T_B0_B = T_BC T_C0_C T_CB).
+#: WORLD_GRAVITY: GeVI's gravity-aligned W (z up; body poses T_W_B = T_W_C T_CB).
+#: WORLD_PROVISIONAL: GeVI's world before its initialisation answered (the first keyframe's rectified
+#: cam0, poses held to be re-expressed in W); only a run that ends before the initialisation releases poses in it, written as T_V_B = T_V_C T_CB.
+WORLD_FIRST_CAM0, WORLD_GRAVITY, WORLD_PROVISIONAL = "first-cam0", "gravity", "provisional"
+
+
+@dataclass(frozen=True)
+class PoseEvent:
+    """One pose leaving the odometry: frame ``index``'s ``sensor`` (rectified "cam0") pose ``T`` (4x4,
+    metres) in ``world``; ``kind`` ONLINE or FINAL (see above)."""
+
+    kind: str
+    index: int
+    T: np.ndarray
+    world: str
+    sensor: str = "cam0"
+
+    def body(self, T_B_C0: np.ndarray) -> np.ndarray:
+        """The body pose of this event, given cam0 -> body ``T_B_C0``: in the first body frame for the
+        WORLD_FIRST_CAM0 world, else in the event's world (see the worlds above)."""
+        T_B_C = T_B_C0 if self.world == WORLD_FIRST_CAM0 else np.eye(4)
+        return T_B_C @ self.T @ invert_pose(T_B_C0)
+
+
+def pose_events(kind: str, items, world: str) -> list[PoseEvent]:
+    """``(index, T)`` pairs as PoseEvents of ``kind`` in ``world``."""
+    return [PoseEvent(kind, int(i), T, world) for i, T in items]
+
+
 @dataclass
 class FrameResult:
     """Outcome of ``Odometry.track`` for one frame.
 
-    ``T_w_c`` (4x4) is the *online* pose of rectified cam0 in the world frame (= the first
-    keyframe's rectified cam0), as known when the frame was tracked.  ``status`` is ``ok``, or
-    ``bridged`` when the pose could not be estimated and was extrapolated at constant velocity, or
-    ``inertial`` when it could not be tracked visually and the IMU carried it (GeVI).
-    ``final`` lists ``(index, T_w_c)`` poses that will not change any more (after the local BA of the
-    window they belong to, or immediately without BA); every frame appears there exactly once over a
-    run (the last ones on ``Odometry.finish()``).  ``kf_trigger`` says why the keyframe rule asked for a
-    keyframe here ("" : it did not; ``keyframe`` says whether one was made): "first", "untracked",
-    "inliers", "displacement", "frames", or "source" (a track export's own keyframes).
+    ``T_w_c`` (4x4) is the odometry's working pose of rectified cam0 in its world, as known when the
+    frame was tracked; what leaves the odometry is ``poses``: the :class:`PoseEvent` s this frame
+    released (its online pose, or the held ones, then the poses made final), in that order.  ``status``
+    is ``ok``, or ``bridged`` when the pose could not be estimated and was extrapolated at constant
+    velocity, or ``inertial`` when it could not be tracked visually and the IMU carried it (GeVI).
+    ``kf_trigger`` says why the keyframe rule asked for a keyframe here ("" : it did not; ``keyframe``
+    says whether one was made): "first", "untracked", "inliers", "displacement", "frames", or "source"
+    (a track export's own keyframes).
     """
 
     index: int
@@ -39,10 +75,7 @@ class FrameResult:
     n_inliers: int = 0
     sigma_px: float = float("nan")
     message: str = ""
-    final: list = field(default_factory=list)
-    # online poses to write now, (index, T_w_c), instead of this frame's T_w_c; None: this frame's.  GeVI
-    # holds the initialisation window's until the gravity-aligned world exists, so the file is one piece
-    online: list | None = None
+    poses: list[PoseEvent] = field(default_factory=list)
     timings: dict = field(default_factory=dict)  # stage -> seconds
     extra: dict = field(default_factory=dict)  # pipeline-specific per-frame state (GeVI: imu_states.csv row)
 
@@ -50,15 +83,14 @@ class FrameResult:
 class Odometry(Protocol):
     """What the run driver (:mod:`gevi_cli.run.driver`) needs of an odometry object.
 
-    ``world_is_cam0``: the world is the first rectified cam0 (a stereo odometry) rather than a frame of
-    the odometry's own (GeVI: gravity-aligned); ``state_columns`` / ``state_file``: the per-frame state
-    each ``FrameResult.extra`` holds and the run-folder file it goes to (no columns: none);
-    ``fallbacks``: frames whose pose step started from SQPnP; ``disparity_offset``: the stereo self-calibration
-(None: off).  ``finish`` makes the held poses final
-    (``closing_ba``: the sequence ended normally), ``release_online`` hands over held online poses,
-    ``summary`` is what ``status.json`` records of the odometry's own state (``imu``)."""
+    Poses leave through one channel: the :class:`PoseEvent` s of each ``track`` result
+    (``FrameResult.poses``), then those of ``close`` once at the end (what the odometry still holds,
+    made final; ``closing_ba``: the sequence ended normally, so the last window may get its BA; after an
+    interrupt or a crash ``False``).  ``state_columns`` / ``state_file``: the per-frame state each
+    ``FrameResult.extra`` holds and the run-folder file it goes to (no columns: none); ``fallbacks``:
+    frames whose pose step started from SQPnP; ``disparity_offset``: the stereo self-calibration (None:
+    off); ``summary`` is what ``status.json`` records of the odometry's own state (``imu``)."""
 
-    world_is_cam0: bool
     state_columns: tuple
     state_file: str
     fallbacks: int
@@ -66,8 +98,6 @@ class Odometry(Protocol):
 
     def track(self, frame) -> FrameResult: ...
 
-    def finish(self, closing_ba: bool = False) -> list: ...
-
-    def release_online(self) -> list: ...
+    def close(self, closing_ba: bool = False) -> list[PoseEvent]: ...
 
     def summary(self) -> dict: ...

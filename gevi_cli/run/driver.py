@@ -1,8 +1,9 @@
 """The run driver: sequence -> odometry -> sinks (the run folder, memory), timing, progress, status.
 
 The odometry objects hold state only; this module owns the reading, the clocks and the progress bar,
-and hands each pose to the sinks (:mod:`gevi_cli.run.sinks`) the moment it is final, so an interrupted
-or crashed run leaves every pose it computed in its folder, and ``status.json`` says how it ended.
+and hands each pose the odometry releases (its PoseEvents, :mod:`gevi_cli.pipelines.types`) to the
+sinks (:mod:`gevi_cli.run.sinks`) the moment it is released, so an interrupted or crashed run leaves
+every pose it computed in its folder, and ``status.json`` says how it ended.
 """
 from __future__ import annotations
 
@@ -12,8 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gevi_cli.errors import DataError
-from gevi_cli.geometry import invert_pose
-from gevi_cli.pipelines.types import BRIDGED, INERTIAL, Odometry
+from gevi_cli.pipelines.types import BRIDGED, FINAL, INERTIAL, Odometry
 from gevi_cli.run.folder import RunStatus
 
 
@@ -56,29 +56,24 @@ def run_odometry(source, odometry: Odometry, status: RunStatus, sinks, *, T_B_C0
     (:mod:`gevi_cli.run.sinks`) the moment it is made."""
     from tqdm import tqdm
 
-    # the world of a stereo odometry is its first cam0 (body trajectory: relative to the first body pose,
-    # T_B0_B = T_BC T_C0_C T_CB); a stereo-inertial one has its own gravity-aligned world (T_W_B = T_W_C T_CB)
-    T_C_B = invert_pose(T_B_C0)
-    T_B_C = T_B_C0 if odometry.world_is_cam0 else np.eye(4)
     stamps: dict[int, int] = {}
     status.frames_total = stop - start
     t_run = time.perf_counter()
     lost_open = None
 
-    def emit_final(items):
-        for idx, T_w_c in items:
+    def emit(events):
+        """PoseEvents to the sinks: the cam0 pose in its world and the body pose (PoseEvent.body)."""
+        for ev in events:
+            T_body = ev.body(T_B_C0)
             for sink in sinks:
-                sink.final(stamps[idx], T_w_c, T_B_C @ T_w_c @ T_C_B)
-
-    def emit_online(items):
-        for idx, T_w_c in items:
-            for sink in sinks:
-                sink.online(stamps[idx], T_B_C @ T_w_c @ T_C_B)
+                if ev.kind == FINAL:
+                    sink.final(stamps[ev.index], ev.T, T_body)
+                else:
+                    sink.online(stamps[ev.index], T_body)
 
     def flush(closing_ba: bool = False):
-        """What the odometry still holds, handed on: pending poses made final, held online poses."""
-        emit_final(odometry.finish(closing_ba=closing_ba))
-        emit_online(odometry.release_online())
+        """What the odometry still holds, handed on (``Odometry.close``)."""
+        emit(odometry.close(closing_ba=closing_ba))
 
     def close_lost(end_t):
         nonlocal lost_open
@@ -110,8 +105,7 @@ def run_odometry(source, odometry: Odometry, status: RunStatus, sinks, *, T_B_C0
             res.timings["read"] = t_read
             total = time.perf_counter() - t0 + t_read
             stamps[res.index] = res.t_ns
-            emit_online(res.online if res.online is not None else [(res.index, res.T_w_c)])
-            emit_final(res.final)
+            emit(res.poses)
             for sink in sinks:
                 sink.frame(index, res, total)
             status.frames_done += 1
