@@ -102,7 +102,7 @@ def ordered(self):
         a, b = getattr(self, lo), getattr(self, hi)
         if not (a < b if strict else a <= b):
             raise PydanticCustomError("crossed", "{lo}={a} must be {op} {hi} ({b})",
-                                      {"lo": lo, "hi": hi, "a": _show(a), "b": _show(b),
+                                      {"lo": lo, "hi": hi, "a": show(a), "b": show(b),
                                        "op": "below" if strict else "at most"})
     return self
 
@@ -142,14 +142,11 @@ def type_name(info) -> str:
     return name + (" or null" if optional else "")
 
 
-def _show(v) -> str:
+def show(v) -> str:
+    """A setting's value as it is written in YAML and ``--set`` (true, false, null, numbers, words)."""
     if v is True or v is False:
         return str(v).lower()
-    if v is None:
-        return "null"
-    if isinstance(v, float) and v.is_integer() and abs(v) < 1e15:
-        return str(v)
-    return str(v)
+    return "null" if v is None else str(v)
 
 
 def _num(v) -> str:
@@ -254,7 +251,7 @@ def _message(cls, err: dict) -> str:
         return f"{pre}{ctx['lo']}={ctx['a']} must be {ctx['op']} {pre}{ctx['hi']} ({ctx['b']})"
     key, name = ".".join(loc), loc[-1]
     info = fields(owner)[name]
-    value = _show(err.get("input"))
+    value = show(err.get("input"))
     c = choices(info)
     if c is not None:
         return f"{key}={value}: not one of {', '.join(map(str, c))}"
@@ -282,7 +279,7 @@ def refuse_inapplicable(cfg, default, method: str | None, kind: str | None, wher
         if rule is None:
             continue
         value = get(cfg, key)
-        pre = "" if flag else f"{key}={_show(value)}: "
+        pre = "" if flag else f"{key}={show(value)}: "
         if rule.values and method in rule.values and value not in rule.values[method]:
             raise GeviError(where, f"{pre}does not apply to {method} ({rule.why})")
         if value == get(default, key):

@@ -165,7 +165,7 @@ def resolve_config(req: RunRequest, kind: str | None, method: str = "cfo"):
 
 def dump_config(req: RunRequest) -> str:
     """Every setting: its effective value, then its type, default, valid domain and help."""
-    from gevi_cli.config import describe
+    from gevi_cli.config import describe, show
 
     kind, method = None, req.method or "cfo"
     if req.sequence is not None:
@@ -175,12 +175,8 @@ def dump_config(req: RunRequest) -> str:
     lines = [f"# effective configuration for {method} ({' -> '.join(sources)}); set any key with --set KEY=VALUE",
              "# KEY=VALUE    # type in its domain (default DEFAULT) [where it applies]: what it does"]
     for key, value, typ, default, dom, help_text in describe(cfg):
-        lines.append(f"{key}={_yaml_scalar(value)}    # {typ} in {dom} (default {_yaml_scalar(default)}) {help_text}")
+        lines.append(f"{key}={show(value)}    # {typ} in {dom} (default {show(default)}) {help_text}")
     return "\n".join(lines)
-
-
-def _yaml_scalar(value) -> str:
-    return "true" if value is True else "false" if value is False else "null" if value is None else str(value)
 
 
 @dataclass(frozen=True)
