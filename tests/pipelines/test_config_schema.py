@@ -227,3 +227,19 @@ def test_a_batch_entry_is_checked_with_its_line(entry, tmp_path):
         load_batch_config(f)
     assert err.value.where == f"{f}:3" and err.value.message.startswith(f"methods: {entry!r}: ")
     assert "does not apply to cfo" in err.value.message or "must be below" in err.value.message
+
+
+def test_a_batch_refuses_front_end_settings_on_a_track_export(tmp_path):
+    from gevi_cli.batch.config import load_batch_config
+    from gevi_cli.batch.plan import check_methods_fit
+    from gevi_cli.errors import GeviError
+
+    root = shared_path("cfo_kitti04")
+    export = root / "data" / "ov2slam_data" / "ov2slam_data_kitti_04_gray"
+    f = _batch(tmp_path, "  - cfo --set frontend.cell_px=16\n",
+               f"  - name: k04\n    path: {export}\n    calib: {root / 'calib' / 'gray_calib.txt'}\n")
+    with pytest.raises(GeviError) as err:
+        check_methods_fit(load_batch_config(f))
+    assert err.value.one_line() == (f"{f}:2: methods: 'cfo --set frontend.cell_px=16' on sequences.k04: --set: "
+                                    "frontend.cell_px=16: does not apply to ov2slam-tracks sequences (a track export "
+                                    "is its own front end)")
