@@ -73,7 +73,7 @@ def setting(default, help: str, *, ge=None, gt=None, le=None, lt=None, inf: bool
     +inf is a value, e.g. an unbounded depth).  ``applies``: an :class:`Applies` narrower than its stage's."""
     extra = {"applies": applies} if applies is not None else None
     kw = {k: v for k, v in (("ge", ge), ("gt", gt), ("le", le), ("lt", lt)) if v is not None}
-    if isinstance(default, float) or (default is None) or inf:
+    if isinstance(default, float) or default is None or inf or type(default) is int:
         kw["allow_inf_nan"] = inf
     return Field(default, description=help, json_schema_extra=extra, **kw)
 

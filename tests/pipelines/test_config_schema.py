@@ -48,6 +48,10 @@ def test_every_setting_has_a_domain_narrower_than_any_value():
                 isinstance(m, (at.Ge, at.Gt, at.Le, at.Lt)) for m in info.metadata):
             unbounded.append(key)
     assert unbounded == []
+    # +inf is a value only where it means "unbounded" (the far depth gates); NaN never
+    from gevi_cli.config import domain
+    assert [k for k, c, n in SETTINGS if domain(c, n).endswith("inf]")] == ["frontend.max_depth_m",
+                                                                            "triangulation.max_depth_m"]
     assert len(SETTINGS) > 100  # every stage's settings are read from the schema
 
 
