@@ -288,7 +288,7 @@ def _seq_list(ctx, node, key):
 
 def _methods(ctx, node, trials) -> list:
     from gevi_cli.pipelines.config import METHODS
-    from gevi_cli.run.method_options import parse_method_args
+    from gevi_cli.run.method_options import check_method_config, parse_method_args
 
     out = []
     for item in _seq_list(ctx, node, "methods"):
@@ -313,6 +313,10 @@ def _methods(ctx, node, trials) -> list:
             params = parse_method_args(["--method", words[0], *words[1:]], where)
         except GeviError as exc:
             raise GeviError(exc.where, f"methods: {text!r}: {exc.message}") from None
+        try:  # the configuration it makes, checked as `gevi run` checks it (the input's kind: per sequence, later)
+            check_method_config(params)
+        except GeviError as exc:
+            raise GeviError(where, f"methods: {text!r}: {exc.one_line()}") from None
         entry = MethodEntry(name=name or " ".join(words), args=tuple(words), trials=n, line=item.start_mark.line + 1,
                             params=params)
         if any(e.name == entry.name or e.ident == entry.ident for e in out):

@@ -60,3 +60,13 @@ def parse_method_args(args: list[str], where: str) -> tuple:
     if not dict(params).get("method"):
         raise GeviError(where, "name the method first: gevi ... or cfo ...")
     return tuple(sorted(params))
+
+
+def check_method_config(params: tuple, kind: str | None = None) -> None:
+    """Resolve the configuration a method entry's ``params`` (from :func:`parse_method_args`) make, for
+    input ``kind`` (None: any), with `gevi run`'s checks; a one-line GeviError naming the option or file."""
+    from gevi_cli.run.session import RunRequest, resolve_config
+
+    values = dict(params)
+    req = RunRequest(sequence=None, **{k: v for k, v in values.items()})
+    resolve_config(req, kind, values["method"])

@@ -58,7 +58,7 @@ class RunRequest:
     imu_time_offset: float | None = None
 
 
-def _is_export(path: Path) -> bool:
+def is_track_export(path: Path) -> bool:
     from gevi_cli.datasets import track_export
 
     return path.is_dir() and track_export.detect(path)
@@ -75,7 +75,7 @@ def open_input(req: RunRequest):
     path = Path(req.sequence)
     if not path.exists():
         raise GeviError(path, "no such file or folder")
-    if req.kind in (None, "ov2slam-tracks") and _is_export(path):
+    if req.kind in (None, "ov2slam-tracks") and is_track_export(path):
         from gevi_cli.datasets.track_export import open_track_export
 
         if req.stride > 1:
@@ -113,60 +113,69 @@ def choose_method(req: RunRequest, source) -> tuple[str, str]:
     return "cfo", "the sequence has no IMU"
 
 
+#: the shortcut options: (RunRequest field, the option's name, the overrides it stands for given its value)
+SHORTCUTS = (
+    ("pnp", "--pnp", lambda v: {"pnp": {"method": v}}),
+    ("no_ba", "--no-ba", lambda v: {"ba": {"enabled": False}}),
+    ("seed", "--seed", lambda v: {"run": {"seed": v}}),
+    ("ransac", "--ransac", lambda v: {"verify": {"ransac": v}}),
+    ("no_adaptive", "--no-adaptive", lambda v: {"fusion": {"adaptive": False}}),
+    ("no_fusion", "--no-fusion", lambda v: {"fusion": {"mode": "4dof"}}),
+    ("imu_time_offset", "--imu-time-offset", lambda v: {"imu": {"time_offset_s": v}}),
+)
+
+
 def resolve_config(req: RunRequest, kind: str | None, method: str = "cfo"):
-    """The effective :class:`OdometryConfig` and the list of files it came from."""
-    from gevi_cli.config import load_yaml, override, parse_set
+    """The effective :class:`OdometryConfig` and the list of files it came from.
+
+    Every layer is checked as it is applied (:func:`gevi_cli.config.build`): unknown keys, types, domains,
+    ordered pairs, and what does not apply to ``method`` or to input ``kind`` (None: not known yet, e.g. a
+    batch method entry) unless it keeps its default.  Errors are one line naming the layer (file or option)."""
+    from gevi_cli.config import build, load_yaml, parse_set, refuse_inapplicable
     from gevi_cli.pipelines.config import METHOD_DEFAULTS, OdometryConfig
 
-    cfg, sources = OdometryConfig(), ["defaults"]
+    layers, sources = [], ["defaults"]
     if METHOD_DEFAULTS.get(method):
-        cfg = override(cfg, METHOD_DEFAULTS[method], f"{method} defaults")
+        layers.append((f"{method} defaults", METHOD_DEFAULTS[method], False))
         sources.append(f"{method} defaults")
+    default = build(OdometryConfig, layers)  # what a setting that does not apply must keep
     if kind in KIND_CONFIG:
         kind_file = config_dir() / KIND_CONFIG[kind]
         if not kind_file.is_file():
             # a silent fallback to the defaults would run another method than the one documented
             raise GeviError(kind_file, f"the configuration for {kind} sequences is missing (broken installation?)")
-        cfg = override(cfg, load_yaml(kind_file), str(kind_file))
+        layers.append((str(kind_file), load_yaml(kind_file), False))
         sources.append(f"gevi_cli/configs/{kind_file.name}")
     if req.config_file:
-        cfg = override(cfg, load_yaml(Path(req.config_file)), req.config_file)
+        layers.append((req.config_file, load_yaml(Path(req.config_file)), False))
         sources.append(req.config_file)
     if req.sets:
-        cfg = override(cfg, parse_set(req.sets), "--set")
+        layers.append(("--set", parse_set(req.sets), False))
         sources.append("--set")
-    shortcuts = {}
-    if req.pnp:
-        shortcuts.setdefault("pnp", {})["method"] = req.pnp
-    if req.no_ba:
-        shortcuts.setdefault("ba", {})["enabled"] = False
-    if req.seed is not None:
-        shortcuts.setdefault("run", {})["seed"] = req.seed
-    if req.ransac:
-        shortcuts.setdefault("verify", {})["ransac"] = req.ransac
-    if req.no_adaptive:
-        shortcuts.setdefault("fusion", {})["adaptive"] = False
-    if req.no_fusion:
-        shortcuts.setdefault("fusion", {})["mode"] = "4dof"
-    if req.imu_time_offset is not None:
-        shortcuts.setdefault("imu", {})["time_offset_s"] = req.imu_time_offset
-    if shortcuts:
-        cfg = override(cfg, shortcuts, "options")
-    return cfg.validate(), sources
+    for name, flag, overrides in SHORTCUTS:
+        value = getattr(req, name)
+        if value is not None and value is not False:
+            layers.append((flag, overrides(value), True))
+
+    def check(cfg, where, is_flag):
+        refuse_inapplicable(cfg, default, method, kind, where, is_flag)
+
+    return build(OdometryConfig, layers, check), sources
 
 
 def dump_config(req: RunRequest) -> str:
-    from gevi_cli.config import flat_items
+    """Every setting: its effective value, then its type, default, valid domain and help."""
+    from gevi_cli.config import describe, show
 
     kind, method = None, req.method or "cfo"
     if req.sequence is not None:
         source, kind = open_input(req)
         method, _ = choose_method(req, source)
     cfg, sources = resolve_config(req, kind, method)
-    lines = [f"# effective configuration ({' -> '.join(sources)}); set any key with --set KEY=VALUE"]
-    for key, value, help_text in flat_items(cfg):
-        v = "true" if value is True else "false" if value is False else value
-        lines.append(f"{key}={v}" + (f"    # {help_text}" if help_text else ""))
+    lines = [f"# effective configuration for {method} ({' -> '.join(sources)}); set any key with --set KEY=VALUE",
+             "# KEY=VALUE    # type in its domain (default DEFAULT) [where it applies]: what it does"]
+    for key, value, typ, default, dom, help_text in describe(cfg):
+        lines.append(f"{key}={show(value)}    # {typ} in {dom} (default {show(default)}) {help_text}")
     return "\n".join(lines)
 
 

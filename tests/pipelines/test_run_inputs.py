@@ -24,28 +24,17 @@ def test_set_and_shortcuts_override_in_order(capsys):
     assert "ba.enabled=false" in out and "run.seed=7" in out
 
 
-@pytest.mark.parametrize("args, where, what", [
-    (["--set", "pnp.nope=1"], "--set: pnp", "unknown key 'nope'"),
-    (["--set", "nostage.k=1"], "--set", "unknown key 'nostage'"),
-    (["--set", "keyframe.min_tracked=many"], "keyframe: min_tracked", "expected an integer"),
-    (["--set", "pnp.method=magic"], "pnp.method", "is not one of"),
-    (["--set", "justakey"], "--set", "expected stage.key=value"),
-    # a stage config's own range check (its __post_init__), not only the type
-    (["--set", "frontend.shading_px=-1"], "--set: frontend", "shading_px >= 0"),
-    (["--set", "frontend.quality_percentile=0"], "--set: frontend", "quality_percentile <= 100"),
-    (["--set", "frontend.cell_px=0"], "--set: frontend", "invalid front-end config"),
-    (["--set", "ba.delta_sigmas=0"], "ba.delta_sigmas", "must be > 0"),
-    # a scale step of 1 would put every feature in one group of log(1) = 0 (no scale at all, silently)
-    (["--set", "frontend.lk_scale_step=1"], "--set: frontend", "lk_scale_step > 1"),
-    (["--set", "frontend.reacquire_ratio=1.5"], "--set: frontend", "0 < reacquire_ratio <= 1"),
-    (["--set", "triangulation.min_disparity_px=-1"], "triangulation.min_disparity_px", "must be >= 0"),
-    (["--set", "triangulation.fill_points=-1"], "triangulation.fill_points", "must be >= 0"),
+@pytest.mark.parametrize("args, what", [
+    (["--set", "pnp.nope=1"], "--set: unknown key pnp.nope; known: method, "),
+    (["--set", "zzz.k=1"], "--set: unknown key zzz; known: frontend, verify, "),
+    (["--set", "keyframe.min_tracked=many"], "--set: keyframe.min_tracked=many: expected int in [0, inf)"),
+    (["--set", "pnp.method=magic"], "--set: pnp.method=magic: not one of be-w, be, ls, epnp, sqpnp"),
+    (["--set", "justakey"], "--set: expected stage.key=value"),
 ])
-def test_bad_set_is_one_line(args, where, what, capsys):
+def test_bad_set_is_one_line(args, what, capsys):
     code, _, err = run_cli(["run", "--dump-config"] + args, capsys)
     assert code == 2
-    assert err.count("\n") == 1 and err.startswith("gevi: error: ")
-    assert where in err and what in err
+    assert err.startswith(f"gevi: error: {what}") and err.count("\n") == 1
 
 
 def test_bad_config_file_names_file_and_line(tmp_path, capsys):
@@ -56,7 +45,7 @@ def test_bad_config_file_names_file_and_line(tmp_path, capsys):
     wrong = tmp_path / "wrong.yaml"
     wrong.write_text("pnp:\n  min_points: 1.5\n")
     code, _, err = run_cli(["run", "--dump-config", "--config", wrong], capsys)
-    assert code == 2 and "min_points" in err and "integer" in err
+    assert code == 2 and err == f"gevi: error: {wrong}: pnp.min_points=1.5: expected int in [4, inf)\n"
 
 
 def test_not_a_sequence(tmp_path, capsys):

@@ -1,0 +1,249 @@
+"""The run configuration's schema (gevi_cli/config.py): every setting has a type and a domain, ordered
+pairs, unknown keys refused with the nearest name, and what does not apply to the method or the input
+refused - each as one line and exit 2 through every door (--set, --config, options, batch entries)."""
+from __future__ import annotations
+
+import math
+
+import annotated_types as at
+import pytest
+
+from gevi_cli.config import choices, fields, leaves, type_name
+from gevi_cli.pipelines.config import OdometryConfig
+from support import run_cli, shared_path
+
+SETTINGS = leaves(OdometryConfig)
+
+
+def _outside(cls, name) -> str:
+    """A --set value outside the setting's domain (type or range)."""
+    info = fields(cls)[name]
+    if choices(info) is not None:
+        return "bogus"
+    kind = type_name(info)
+    if kind == "bool":
+        return "maybe"
+    for m in info.metadata:
+        if isinstance(m, at.Ge):
+            return str(m.ge - 1)
+        if isinstance(m, at.Gt):
+            return str(m.gt)
+        if isinstance(m, at.Le):
+            return str(m.le + 1)
+        if isinstance(m, at.Lt):
+            return str(m.lt)
+    return "nan"  # unbounded: still a finite number
+
+
+def _one_line(err: str) -> bool:
+    return err.startswith("gevi: error: ") and err.count("\n") == 1
+
+
+def test_every_setting_has_a_domain_narrower_than_any_value():
+    """No unbounded number where the code needs less: an int or float setting without a bound is named here."""
+    unbounded = []
+    for key, cls, name in SETTINGS:
+        info = fields(cls)[name]
+        if type_name(info) in ("int", "float", "odd int") and not any(
+                isinstance(m, (at.Ge, at.Gt, at.Le, at.Lt)) for m in info.metadata):
+            unbounded.append(key)
+    assert unbounded == []
+    # +inf is a value only where it means "unbounded" (the far depth gates); NaN never
+    from gevi_cli.config import domain
+    assert [k for k, c, n in SETTINGS if domain(c, n).endswith("inf]")] == ["frontend.max_depth_m",
+                                                                            "triangulation.max_depth_m"]
+    assert len(SETTINGS) > 100  # every stage's settings are read from the schema
+
+
+@pytest.mark.parametrize("key, cls, name", SETTINGS, ids=[k for k, _, _ in SETTINGS])
+def test_a_value_outside_the_domain_is_one_line(key, cls, name, capsys):
+    bad = _outside(cls, name)
+    code, out, err = run_cli(["run", "--dump-config", "--method", "gevi", "--set", f"{key}={bad}"], capsys)
+    assert code == 2 and out == "" and _one_line(err), err
+    assert err.startswith(f"gevi: error: --set: {key}=") and ("expected" in err or "not one of" in err), err
+
+
+@pytest.mark.parametrize("key", [k for k, c, n in SETTINGS if type_name(fields(c)[n]) == "int"])
+def test_an_int_setting_refuses_a_fraction_and_a_bool(key, capsys):
+    for bad in ("2.5", "true"):
+        code, _, err = run_cli(["run", "--dump-config", "--method", "gevi", "--set", f"{key}={bad}"], capsys)
+        assert code == 2 and _one_line(err) and f"{key}=" in err and "expected int" in err, err
+
+
+PAIRS = [(f"{stage}.{lo}", f"{stage}.{hi}", strict) for stage, info in fields(OdometryConfig).items()
+         for lo, hi, strict in getattr(info.annotation, "ORDERED", ())]
+
+
+def test_the_pairs_are_the_ones_the_code_needs():
+    assert {(lo, hi) for lo, hi, _ in PAIRS} == {
+        ("frontend.min_depth_m", "frontend.max_depth_m"), ("triangulation.min_depth_m", "triangulation.max_depth_m"),
+        ("noise.min_px", "noise.max_px"), ("pnp.refine_steps", "pnp.max_refine_steps"),
+        ("init.window_s", "init.max_window_s"), ("init.still_lag_s", "init.still_min_s")}
+
+
+@pytest.mark.parametrize("lo, hi, strict", PAIRS, ids=[lo for lo, _, _ in PAIRS])
+def test_a_crossed_pair_is_one_line(lo, hi, strict, capsys):
+    defaults = OdometryConfig()
+    stage, hi_name = hi.split(".")
+    high = getattr(getattr(defaults, stage), hi_name)
+    high = 10.0 if math.isinf(high) else high
+    crossed = [f"{hi}={high}", f"{lo}={high if strict else high + 1}"]
+    code, _, err = run_cli(["run", "--dump-config", "--method", "gevi", "--set", crossed[0], "--set", crossed[1]],
+                           capsys)
+    assert code == 2 and _one_line(err), err
+    assert f"--set: {lo}=" in err and f"must be {'below' if strict else 'at most'} {hi}" in err
+    # in order, the same values are fine
+    ok = [f"{hi}={high}", f"{lo}={high / 2 if strict else high}"]
+    assert run_cli(["run", "--dump-config", "--method", "gevi", "--set", ok[0], "--set", ok[1]], capsys)[0] == 0
+
+
+@pytest.mark.parametrize("args, line", [
+    # the noise would have been pinned at max_px without a word
+    (["--set", "noise.min_px=9"], "--set: noise.min_px=9.0 must be below noise.max_px (5.0)"),
+    (["--set", "keyframe.min_tracked_ratio=-3"], "--set: keyframe.min_tracked_ratio=-3.0: expected float in [0, 1]"),
+    # a bad front-end value: one line, not the whole dataclass
+    (["--set", "frontend.lk_window=4"], "--set: frontend.lk_window=4: expected odd int in [3, inf)"),
+    (["--set", "frontend.cell_px=0"], "--set: frontend.cell_px=0: expected int in [1, inf)"),
+    (["--set", "frontend.derotate_prior=gyro"], "--set: frontend.derotate_prior=gyro: not one of pose, image"),
+    (["--set", "pnp.methd=epnp"], "--set: unknown key pnp.methd; did you mean pnp.method?"),
+    (["--set", "fusion.acc_order=false"], "--set: fusion.acc_order=false: not one of 0, 2, 3"),
+    (["--set", "imu.time_offset_s=inf"], "--set: imu.time_offset_s=inf: expected float or null in (-inf, inf)"),
+    (["--pnp", "epnp", "--set", "frontend.max_depth_m=0.3"],
+     "--set: frontend.min_depth_m=0.5 must be below frontend.max_depth_m (0.3)"),
+])
+def test_the_issue_examples_are_one_line(args, line, capsys):
+    code, _, err = run_cli(["run", "--dump-config"] + args, capsys)
+    assert code == 2 and err == f"gevi: error: {line}\n"
+
+
+def test_a_config_file_is_checked_as_set(tmp_path, capsys):
+    f = tmp_path / "c.yaml"
+    f.write_text("noise:\n  max_px: 0.01\n")
+    code, _, err = run_cli(["run", "--dump-config", "--config", f], capsys)
+    assert code == 2 and err == f"gevi: error: {f}: noise.min_px=0.05 must be below noise.max_px (0.01)\n"
+    f.write_text("keyfram:\n  min_tracked: 3\n")
+    code, _, err = run_cli(["run", "--dump-config", "--config", f], capsys)
+    assert code == 2 and err == f"gevi: error: {f}: unknown key keyfram; did you mean keyframe?\n"
+
+
+def test_the_packaged_kind_configs_are_valid():
+    from gevi_cli.run.session import KIND_CONFIG, RunRequest, resolve_config
+
+    for kind in KIND_CONFIG:
+        for method in ("cfo", "gevi"):
+            cfg, sources = resolve_config(RunRequest(sequence=None), kind, method)
+            assert sources[-1].startswith("gevi_cli/configs/")
+
+
+def test_dump_config_shows_type_default_and_domain(capsys):
+    code, out, _ = run_cli(["run", "--dump-config", "--method", "gevi", "--set", "noise.max_px=4"], capsys)
+    assert code == 0
+    lines = {line.split("=", 1)[0]: line for line in out.splitlines() if not line.startswith("#")}
+    assert set(lines) == {k for k, _, _ in SETTINGS}
+    assert lines["noise.max_px"].startswith("noise.max_px=4.0    # float in (min_px, inf) (default 5.0) ")
+    assert lines["verify.ransac"].startswith("verify.ransac=3pt    # choice in {5pt, 3pt, none} (default 5pt) ")
+    assert "[gevi only]" in lines["fusion.mode"] and "[images only]" in lines["frontend.cell_px"]
+
+
+# ---------------------------------------------------------------------------------------- what does not apply
+CFO_REFUSED = [
+    (["--ransac", "3pt"], "--ransac: does not apply to cfo (3pt is GeVI's upright RANSAC"),
+    (["--no-fusion"], "--no-fusion: does not apply to cfo (GeVI only: the gravity fusion"),
+    (["--no-adaptive"], "--no-adaptive: does not apply to cfo (GeVI only: the gravity fusion"),
+    (["--imu-time-offset", "0.01"], "--imu-time-offset: does not apply to cfo (GeVI only: the IMU settings"),
+    (["--set", "verify.ransac=3pt"], "--set: verify.ransac=3pt: does not apply to cfo (3pt is GeVI's"),
+    (["--set", "fusion.mode=4dof"], "--set: fusion.mode=4dof: does not apply to cfo (GeVI only"),
+    (["--set", "fusion.adaptive=false"], "--set: fusion.adaptive=false: does not apply to cfo (GeVI only"),
+    (["--set", "init.window_s=3"], "--set: init.window_s=3.0: does not apply to cfo (GeVI only: the initialisation"),
+    (["--set", "imu.max_gap_factor=3"], "--set: imu.max_gap_factor=3.0: does not apply to cfo (GeVI only"),
+    (["--set", "verify.threshold_sigmas=2"], "--set: verify.threshold_sigmas=2.0: does not apply to cfo"),
+]
+
+
+@pytest.mark.parametrize("args, line", CFO_REFUSED, ids=[" ".join(a) for a, _ in CFO_REFUSED])
+def test_cfo_refuses_what_is_gevis(args, line, capsys):
+    code, _, err = run_cli(["run", "--dump-config", "--method", "cfo"] + args, capsys)
+    assert code == 2 and _one_line(err) and err.startswith(f"gevi: error: {line}"), err
+    # GeVI takes them
+    assert run_cli(["run", "--dump-config", "--method", "gevi"] + args, capsys)[0] == 0
+
+
+def test_cfo_takes_gevi_keys_at_their_defaults_and_its_own_verification(capsys):
+    for args in (["--set", "fusion.mode=bcd"], ["--ransac", "5pt"], ["--set", "verify.ransac=none"]):
+        assert run_cli(["run", "--dump-config", "--method", "cfo"] + args, capsys)[0] == 0, args
+
+
+def test_cfo_refuses_gevi_keys_in_a_config_file(tmp_path, capsys):
+    f = tmp_path / "c.yaml"
+    f.write_text("verify:\n  ransac: 3pt\n")
+    code, _, err = run_cli(["run", "--dump-config", "--method", "cfo", "--config", f], capsys)
+    assert code == 2 and err.startswith(f"gevi: error: {f}: verify.ransac=3pt: does not apply to cfo")
+
+
+def test_a_track_export_refuses_front_end_settings():
+    from gevi_cli.errors import GeviError
+    from gevi_cli.run.session import RunRequest, resolve_config
+
+    req = RunRequest(sequence=None, sets=("frontend.cell_px=16", "frontend.lk_window=5"))
+    with pytest.raises(GeviError) as err:
+        resolve_config(req, "ov2slam-tracks", "cfo")
+    assert err.value.one_line() == ("--set: frontend.cell_px=16: does not apply to ov2slam-tracks sequences (a track "
+                                    "export is its own front end)")
+    resolve_config(req, "kitti", "cfo")  # images: it applies
+    flags = RunRequest(sequence=None, sets=("verify.use_export_flags=true",))
+    resolve_config(flags, "ov2slam-tracks", "cfo")
+    with pytest.raises(GeviError, match="use_export_flags=true: does not apply to kitti sequences"):
+        resolve_config(flags, "kitti", "cfo")
+
+
+def test_a_track_export_run_refuses_front_end_settings(tmp_path, capsys):
+    root = shared_path("cfo_kitti04")
+    export = root / "data" / "ov2slam_data" / "ov2slam_data_kitti_04_gray"
+    code, _, err = run_cli(["run", export, "--calib", root / "calib" / "gray_calib.txt", "--set",
+                            "frontend.cell_px=16", "-o", tmp_path / "r"], capsys)
+    assert code == 2 and err == ("gevi: error: --set: frontend.cell_px=16: does not apply to ov2slam-tracks sequences "
+                                 "(a track export is its own front end)\n")
+    assert not (tmp_path / "r").exists()
+
+
+def test_a_bad_setting_fails_before_the_run_starts(tmp_path, capsys):
+    seq = shared_path("euroc_micro")
+    code, out, err = run_cli(["run", seq, "--set", "noise.min_px=9", "-o", tmp_path / "r"], capsys)
+    assert code == 2 and _one_line(err) and "noise.min_px=9.0 must be below" in err
+    assert not (tmp_path / "r").exists() and "frames tracked" not in out
+
+
+def _batch(tmp_path, methods: str, sequences: str = "  - name: s\n    simulate: {preset: pool-easy}\n"):
+    f = tmp_path / "b.yaml"
+    f.write_text(f"methods:\n{methods}sequences:\n{sequences}")
+    return f
+
+
+@pytest.mark.parametrize("entry", ["cfo --ransac 3pt", "cfo --no-fusion", "cfo --no-adaptive",
+                                   "cfo --imu-time-offset 0.1", "cfo --set verify.ransac=3pt",
+                                   "gevi --set noise.min_px=9"])
+def test_a_batch_entry_is_checked_with_its_line(entry, tmp_path):
+    from gevi_cli.batch.config import load_batch_config
+    from gevi_cli.errors import GeviError
+
+    f = _batch(tmp_path, f"  - gevi\n  - {entry}\n")
+    with pytest.raises(GeviError) as err:
+        load_batch_config(f)
+    assert err.value.where == f"{f}:3" and err.value.message.startswith(f"methods: {entry!r}: ")
+    assert "does not apply to cfo" in err.value.message or "must be below" in err.value.message
+
+
+def test_a_batch_refuses_front_end_settings_on_a_track_export(tmp_path):
+    from gevi_cli.batch.config import load_batch_config
+    from gevi_cli.batch.plan import check_methods_fit
+    from gevi_cli.errors import GeviError
+
+    root = shared_path("cfo_kitti04")
+    export = root / "data" / "ov2slam_data" / "ov2slam_data_kitti_04_gray"
+    f = _batch(tmp_path, "  - cfo --set frontend.cell_px=16\n",
+               f"  - name: k04\n    path: {export}\n    calib: {root / 'calib' / 'gray_calib.txt'}\n")
+    with pytest.raises(GeviError) as err:
+        check_methods_fit(load_batch_config(f))
+    assert err.value.one_line() == (f"{f}:2: methods: 'cfo --set frontend.cell_px=16' on sequences.k04: --set: "
+                                    "frontend.cell_px=16: does not apply to ov2slam-tracks sequences (a track export "
+                                    "is its own front end)")
