@@ -174,7 +174,8 @@ def domain(cls, name: str) -> str:
         elif isinstance(m, at.Lt):
             hi, hi_open = _num(m.lt), True
     for m in info.metadata:
-        if type(m).__name__ == "_PydanticGeneralMetadata" and getattr(m, "allow_inf_nan", True) is False:
+        # pydantic carries allow_inf_nan in a metadata object whose class changed across 2.x releases
+        if getattr(m, "allow_inf_nan", True) is False:
             allow_inf = False
     for a, b, strict in getattr(cls, "ORDERED", ()):
         if name == a:
