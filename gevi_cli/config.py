@@ -3,7 +3,7 @@
 A configuration is a tree of pydantic dataclasses, one per stage (``gevi_cli/frontend/config.py``,
 ``gevi_cli/pipelines/config.py``).  Each setting is declared once with :func:`setting`: its type, its
 default (the product), its valid domain and a one-line help; a stage lists its ordered pairs
-(``ORDERED``, e.g. ``noise.min_px < noise.max_px``) and, where it applies to one method or one kind of
+(``ORDERED``, e.g. ``triangulation.min_depth_m < triangulation.max_depth_m``) and, where it applies to one method or one kind of
 input only, its :class:`Applies`.  The pipelines read plain attributes (``cfg.pnp.method``).
 
 Layers (defaults, a per-kind YAML, ``--config``, ``--set``, each option) only *override* keys: every
@@ -52,13 +52,6 @@ def _number(value):
 def _odd(value: int) -> int:
     if value % 2 != 1:
         raise PydanticCustomError("odd", "expected an odd integer")
-    return value
-
-
-def integer_choice(value):
-    """An integer choice is an int, not a bool (``False == 0``)."""
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise PydanticCustomError("integer", "expected an integer")
     return value
 
 

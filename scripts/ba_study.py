@@ -13,7 +13,6 @@ rectified cam0) with the render's truth for:
 * ``BA``: the BA as the pipeline ran it (its kernel, delta 3 sigma);
 * ``BA huber`` / ``BA truncated``: the other kernel;
 * ``BA left only``: without the pairs that involve a right image (scale then rests on the start);
-* ``BA max_gap 1``: frame-frame pairs between neighbours only (``ba.max_gap`` = 1);
 * ``BA + PnP terms`` [a study variant, not in gevi]: the BA's epipolar residuals (inliers of the
   start within 3 sigma) plus, for every frame of the window, the whitened reprojection residuals of
   KF1's stereo points (covariance of spec 4, tied rows, plus the frame's noise, as ``be-w``; those
@@ -220,7 +219,6 @@ def evaluate(recs: list[dict], max_window: int) -> dict[str, tuple]:
         "BA huber": ba({"kernel": "huber"}),
         "BA truncated": ba({"kernel": "truncated"}),
         "BA left only": ba({"use_right": False}),
-        "BA max_gap 1": ba({"max_gap": 1}),
         "BA + PnP terms": lambda r: ba_with_pnp_terms(r["window"]),
     }
     if any("ideal" in r for r in recs):

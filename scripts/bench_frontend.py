@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 
 from gevi_cli.datasets import open_sequence
-from gevi_cli.frontend.config import FrontendConfig
+from gevi_cli.frontend.config import LK_EPS, LK_ITERS, LK_LEVELS, FrontendConfig
 from gevi_cli.frontend.grid import GridDetector
 from gevi_cli.frontend.image_frontend import STAGES, ImageFrontEnd
 from gevi_cli.frontend.klt import build_pyramid
@@ -45,7 +45,7 @@ def bench_sequence(path: Path, every: int, repeat: int) -> dict:
     frames = list(seq.frames())
     lefts, rights = _image_paths(seq)
     cfg = FrontendConfig()
-    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, cfg.lk_iters, cfg.lk_eps)
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, LK_ITERS, LK_EPS)
     for _ in range(repeat):  # the last pass is reported: caches and allocator are warm
         fe = ImageFrontEnd(seq.calibration, cfg)
         rows = {"track": [], "keyframe": []}
@@ -67,7 +67,7 @@ def bench_sequence(path: Path, every: int, repeat: int) -> dict:
                 if len(uv_before):
                     t0 = time.perf_counter()
                     cv2.calcOpticalFlowPyrLK(frames[i - 1].left, frame.left, uv_before, None,
-                                             winSize=(cfg.lk_window,) * 2, maxLevel=cfg.lk_levels, criteria=crit)
+                                             winSize=(cfg.lk_window,) * 2, maxLevel=LK_LEVELS, criteria=crit)
                     floor_lk.append(time.perf_counter() - t0)
             if i % every == 0:
                 t0 = time.perf_counter()

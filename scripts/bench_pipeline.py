@@ -47,10 +47,10 @@ def gevi_cmd() -> list[str]:
 
 def floor_ms(seq) -> float:
     """Mean ms per frame of imread x2 + one LK of GFTT corners from the previous frame."""
-    from gevi_cli.frontend.config import FrontendConfig
+    from gevi_cli.frontend.config import LK_EPS, LK_ITERS, LK_LEVELS, MIN_DISTANCE_PX, FrontendConfig
 
     cfg = FrontendConfig()
-    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, cfg.lk_iters, cfg.lk_eps)
+    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, LK_ITERS, LK_EPS)
     left, right = list(seq._left), list(seq._right)
     prev, pts, times = None, None, []
     for a, b in zip(left, right):
@@ -59,10 +59,10 @@ def floor_ms(seq) -> float:
         cv2.imread(b, cv2.IMREAD_GRAYSCALE)
         if prev is not None and pts is not None and len(pts):
             cv2.calcOpticalFlowPyrLK(prev, img, pts, None, winSize=(cfg.lk_window, cfg.lk_window),
-                                     maxLevel=cfg.lk_levels, criteria=crit)
+                                     maxLevel=LK_LEVELS, criteria=crit)
         times.append(time.perf_counter() - t0)
         if pts is None:
-            pts = cv2.goodFeaturesToTrack(img, 300, cfg.quality, cfg.min_distance_px)
+            pts = cv2.goodFeaturesToTrack(img, 300, cfg.quality, MIN_DISTANCE_PX)
         prev = img
     return 1e3 * float(np.mean(times[1:]))
 

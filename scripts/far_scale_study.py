@@ -7,13 +7,12 @@ triangulated points and, per frame, the matches the pose step used.  Prints (1) 
 stereo depth against its depth triangulated over the later frames' tracks from the ground-truth poses
 (rays least squares, parallax > 0.5 deg), per disparity bin; (2) the median ratio of the keyframe ->
 frame translation to the ground truth's for the pose step as run, for the unweighted Bias-Eli step
-(`be`), and for the weighted step with the far points by bearing only, per disparity band of the points
-used.  Frames: keyframe-left camera, metres; ground truth: the sequence's cam0 poses.
+(`be`), and for the steps with the far points (beyond 40 baselines) by bearing only (both the linear
+and the weighted steps: the rule is no longer in the pipeline), per disparity band of the points used.  Frames: keyframe-left camera, metres; ground truth: the sequence's cam0 poses.
 """
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 
 import numpy as np
 
@@ -85,7 +84,7 @@ def main() -> int:
     ap.add_argument("--stride", type=int, default=1)
     ap.add_argument("--plot", help="write the depth-ratio plot here (PNG)")
     a = ap.parse_args()
-    kfs, steps, obs, T_gt, cam, cfg = capture(a.sequence, a.stride, ["pnp.far_baselines=0"])
+    kfs, steps, obs, T_gt, cam, cfg = capture(a.sequence, a.stride)
     fb = cam.fx * cam.baseline
     pairs = []
     for k, (ids, z, p) in sorted(kfs.items()):
@@ -100,7 +99,6 @@ def main() -> int:
             print(f"| {lo}-{hi} | {m.sum()} | {np.median(pairs[m, 1]):.3f} |")
     print("\n| points used | steps | as run (be-w, every point by depth) | be | be-w, far points by bearing |")
     print("|---|---|---|---|---|")
-    far_cfg = replace(cfg.pnp, far_baselines=40.0)
     for lo, hi in [(0, 10), (10, 20), (20, 1000), (0, 1000)]:
         rows = []
         for s in steps:
@@ -114,7 +112,8 @@ def main() -> int:
             try:
                 _, t_w, _ = tracked_pose6(p, cov, q, cfg.pnp, s["sigma2"], cam.f)
                 _, t_b = est.pnp6_be(p, cov, q)
-                _, t_f, _ = tracked_pose6(p, cov, q, far_cfg, s["sigma2"], cam.f, (z[:, 0] - y[:, 0]) < 1 / 40.0)
+                far = (z[:, 0] - y[:, 0]) < 1 / 40.0
+                _, t_f, _ = tracked_pose6(p, est.bearing_only(p, cov, far), q, cfg.pnp, s["sigma2"], cam.f)
             except Exception:  # a band too small or degenerate for a pose: left out
                 continue
             rows.append([np.linalg.norm(t_w) / tg, np.linalg.norm(t_b) / tg, np.linalg.norm(t_f) / tg])

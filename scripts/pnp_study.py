@@ -10,16 +10,15 @@ Then, frame by frame and from the same inputs, it computes ``T_ck`` (keyframe-le
 with each variant below and compares it with the render's true ``T_ck``:
 
 * ``epnp``: OpenCV EPnP + iterated LM (unweighted), i.e. ``--pnp epnp``, without the re-verification;
-* ``epnp + reverify``: the same with ``pnp.reverify`` (3D-2D RANSAC when the median reprojection
+* ``epnp + reverify``: the same with the re-verification (3D-2D RANSAC when the median reprojection
   error is too large), as ``--pnp epnp`` runs now;
-* ``one step``: Bias-Eli + S2's single weighted step, the current frame noise-free and the four stereo
-  coordinates independent (gevi's ``be-w`` before the step rule; spec 5.4 as written);
-* ``+ current noise, steps``: the same weights plus ``sigma^2 I`` for the current frame, stepping until
-  the step is within 2 standard deviations (``pnp.step_tol``);
+* ``one step``: Bias-Eli + S2's single weighted step (with the current frame's noise ``sigma^2 I``) and
+  the four stereo coordinates independent (gevi's ``be-w`` before the step rule);
+* ``+ steps``: stepping until the step is within 2 standard deviations (``pose6.STEP_TOL``);
 * ``be-w before the chi2 gate``: also with the right row tied to the left one for row-refined
   matches (``tied_rows``, docs/method.md 4) and the re-verification;
 * ``be-w``: as the pipeline runs it now, i.e. also with the chi-square gate on the weighted
-  residuals (``pnp.chi2_gate``: wrong stereo depths out, the steps redone).
+  residuals (``pose6.CHI2_GATE``: wrong stereo depths out, the steps redone).
 
 Every variant goes through the pipeline's tracking gates (``tracked_pose6``: the SQPnP fallback of
 be-w, the median-error limit).
@@ -80,26 +79,38 @@ def record(render: Path) -> list[dict]:
 
 def variants():
     from gevi_cli import estimators as est
+    from gevi_cli.pipelines import pose6
     from gevi_cli.pipelines.config import PnPConfig
     from gevi_cli.pipelines.pose6 import tracked_pose6
 
     cfg = PnPConfig()
-    old = replace(cfg, chi2_gate=0.0)  # the variants before the gate
+    # the variants before the gate, without the re-verification, with one step: the pipeline's constants
+    # (pose6.CHI2_GATE, pose6.STEP_TOL) and its re-verification switched for the one call
+    old = {"CHI2_GATE": 0.0}
+    no_reverify = {**old, "reverified": lambda *a, **k: None}
 
-    def run(c, tied):
+    def run(c, tied, patch=None):
         def fn(r):
             p, cov = est.triangulate(r["z"], r["y"], r["R_rl"], r["t_rl"], r["s2"],
                                      tied_rows=(r["z"][:, 1] == r["y"][:, 1]) if tied else None)
-            R, t, _ = tracked_pose6(p, cov, r["q"], c, r["s2"], r["f"])
+            saved = {k: getattr(pose6, k) for k in (patch or {})}
+            try:
+                for k, v in (patch or {}).items():
+                    setattr(pose6, k, v)
+                R, t, _ = tracked_pose6(p, cov, r["q"], c, r["s2"], r["f"])
+            finally:
+                for k, v in saved.items():
+                    setattr(pose6, k, v)
             return R, t
         return fn
 
+    # (the column without the current frame's noise went with that setting: docs/studies/method_history.md)
     return {
-        "epnp": run(replace(old, method="epnp", reverify=False), False),
-        "epnp + reverify": run(replace(old, method="epnp"), False),
-        "one step": run(replace(old, step_tol=0.0, current_noise=False, reverify=False), False),
-        "+ current noise, steps": run(replace(old, reverify=False), False),
-        "be-w before the chi2 gate": run(old, True),
+        "epnp": run(replace(cfg, method="epnp"), False, no_reverify),
+        "epnp + reverify": run(replace(cfg, method="epnp"), False, old),
+        "one step": run(cfg, False, {**no_reverify, "STEP_TOL": 0.0}),
+        "+ steps": run(cfg, False, no_reverify),
+        "be-w before the chi2 gate": run(cfg, True, old),
         "be-w": run(cfg, True),
     }
 

@@ -102,7 +102,6 @@ class BAOptions:
     sparse: bool = False  # scipy only: analytic Jacobian as scipy.sparse CSR (tr_solver lsmr)
     method: str = "trf"  # scipy only: least_squares method ('lm' only with kernel 'none')
     tol: float = 1e-12  # relative step / cost-decrease tolerance (scipy: ftol = xtol = gtol)
-    max_gap: int = 0  # F_j -> F_k pairs only for j - k <= max_gap (0: every j > k, the authors' pairs)
 
 
 @dataclass
@@ -182,7 +181,7 @@ def _check_obs(o, name):
 class BAProblem:
     """Residual/Jacobian machinery of one window (index arrays built once)."""
 
-    def __init__(self, window: BAWindow, use_right: bool = True, max_gap: int = 0):
+    def __init__(self, window: BAWindow, use_right: bool = True):
         K = len(window.frames)
         self.K = K
         self.n_frames = K + 1  # parametrised frames
@@ -212,7 +211,7 @@ class BAProblem:
                 pairs += [(kf2R, k), (k, kf1R)]
         for j in F:
             for k in F:
-                if j > k and (max_gap <= 0 or j - k <= max_gap):
+                if j > k:
                     pairs.append((j, k))
         pairs += [(kf2L, kf1L)]
         if use_right:
@@ -373,8 +372,8 @@ class BAProblem:
         return euler_zyx(P[:, :3]), P[:, 3:].copy()
 
 
-def build_ba_problem(window: BAWindow, use_right: bool = True, max_gap: int = 0) -> BAProblem:
-    return BAProblem(window, use_right, max_gap)
+def build_ba_problem(window: BAWindow, use_right: bool = True) -> BAProblem:
+    return BAProblem(window, use_right)
 
 
 def _truncated_loss(z):
@@ -495,7 +494,7 @@ def epipolar_local_ba(window: BAWindow, options: BAOptions | None = None) -> BAR
     residuals than parameters, ``DegenerateInput`` if the solver returns non-finite poses.
     """
     opt = options or BAOptions()
-    prob = BAProblem(window, opt.use_right, opt.max_gap)
+    prob = BAProblem(window, opt.use_right)
     if prob.m < prob.n_params:
         raise TooFewPoints(prob.m, prob.n_params, "epipolar residuals")
     x0 = prob.x0

@@ -1,6 +1,6 @@
 """Shi-Tomasi corners on a grid: at most one corner per cell, only in cells with no tracked feature.
 
-Pixels of the (rectified) image; ``cell_px``, ``border_px``, ``min_distance_px`` from
+Pixels of the (rectified) image; ``cell_px`` and ``quality*`` from
 :class:`~gevi_cli.frontend.config.FrontendConfig`.  Fully vectorized, deterministic (ties go to the
 first pixel in row-major order).
 """
@@ -9,7 +9,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from gevi_cli.frontend.config import FrontendConfig
+from gevi_cli.frontend.config import BORDER_PX, MIN_DISTANCE_PX, FrontendConfig
 
 
 class _Scratch:
@@ -86,8 +86,8 @@ def detect_grid(img: np.ndarray, occupied_uv: np.ndarray | None, cfg: FrontendCo
     """New corners (n, 2) float64 pixels (u, v), at most one per ``cell_px`` cell, ordered by cell.
 
     A cell holding any point of ``occupied_uv`` (tracked features, pixels) gets no corner; nor does
-    the ``border_px`` margin or where ``mask`` (optional, same size) is zero.  A candidate is dropped
-    when a stronger candidate or an occupied point is closer than ``min_distance_px``.  The quality
+    the ``BORDER_PX`` margin or where ``mask`` (optional, same size) is zero.  A candidate is dropped
+    when a stronger candidate or an occupied point is closer than ``MIN_DISTANCE_PX``.  The quality
     level is relative to the strongest corner of the whole image (outside border and mask, occupied
     cells included), so the threshold does not depend on which cells happen to be tracked.
     "Strongest" is the ``quality_percentile`` of the cells' best scores (100: the single strongest
@@ -97,7 +97,7 @@ def detect_grid(img: np.ndarray, occupied_uv: np.ndarray | None, cfg: FrontendCo
     if img.ndim != 2 or img.dtype != np.uint8:
         raise ValueError(f"detect_grid needs a 2-D uint8 image, got shape {img.shape} dtype {img.dtype}")
     h, w = img.shape
-    cell, bd = int(cfg.cell_px), int(cfg.border_px)
+    cell, bd = int(cfg.cell_px), int(BORDER_PX)
     s = _scratch if _scratch is not None else _Scratch(h, w, cell)
     score = min_eigen_map(img, s)
     pad = s.padded
@@ -129,10 +129,10 @@ def detect_grid(img: np.ndarray, occupied_uv: np.ndarray | None, cfg: FrontendCo
         orow = np.clip(np.floor(occ[:, 1] / cell).astype(np.int64), 0, ny - 1)
         ok[orow, oc] = False
 
-    r2 = float(cfg.min_distance_px) ** 2
+    r2 = float(MIN_DISTANCE_PX) ** 2
     if r2 > 0.0:
-        # Only cells up to k away can hold a point closer than min_distance_px (k = 1 for the defaults).
-        k = int(np.ceil(cfg.min_distance_px / cell))
+        # Only cells up to k away can hold a point closer than MIN_DISTANCE_PX (k = 1 for the defaults).
+        k = int(np.ceil(MIN_DISTANCE_PX / cell))
         # candidate vs candidate: the weaker one goes (ties: the later cell)
         rank = np.where(ok, best, -np.inf)
         order = np.arange(ny * nx).reshape(ny, nx)

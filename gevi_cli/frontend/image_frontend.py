@@ -24,7 +24,7 @@ import numpy as np
 from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.frontend import reacquire
 from gevi_cli.frontend.affine import PatchTemplates
-from gevi_cli.frontend.config import FrontendConfig
+from gevi_cli.frontend.config import DEROTATE_MIN_DEG, FB_MAX_PX, FrontendConfig
 from gevi_cli.frontend.derotate import apply_homography, derotate, fit_inplane, rotation_homography
 from gevi_cli.frontend.grid import GridDetector
 from gevi_cli.frontend.klt import Pyramid, build_pyramid, in_image, track_lk, track_lk_scaled
@@ -78,7 +78,7 @@ class ImageFrontEnd:
 
         ``rotation``: predicted ``R_cp`` (3, 3), previous rectified-left camera coordinates ->
         current ones (None: the rotation fitted to the last step's tracks); removed before LK when
-        ``cfg.derotate`` is on and it exceeds ``cfg.derotate_min_deg``.  ``predicted``: the back end's
+        ``cfg.derotate`` is on and it exceeds ``DEROTATE_MIN_DEG``.  ``predicted``: the back end's
         predicted pixels and patch scales in ``frame`` of some features (their keyframe points seen from
         the predicted pose); LK starts there instead of at the previous pixel, at that scale."""
         self.timings = dict.fromkeys(STAGES, 0.0)
@@ -87,14 +87,14 @@ class ImageFrontEnd:
 
     def reacquire(self, frame, predicted: Prediction | None = None, keep_tracks: bool = False) -> FeatureObs | None:
         """The last keyframe's features found again in ``frame`` (the frame ``track`` just ran on) by
-        ORB descriptors, guided by ``predicted`` pixels where given (within ``cfg.reacquire_radius_px``;
+        ORB descriptors, guided by ``predicted`` pixels where given (within ``REACQUIRE_RADIUS_PX``;
         :mod:`~gevi_cli.frontend.reacquire`).
 
         Each match is refined to sub-pixel by LK from the keyframe's image, started at the matched
         detection with the patch scaled by the detection's pyramid scale, and kept only if that LK
         passes its forward-backward check.  A feature LK had lost is tracked again; one LK still
         holds keeps its LK pixel with ``keep_tracks`` (a top-up), else the re-found pixel replaces it
-        unless the two agree within ``cfg.fb_max_px`` x 4 px (LK has just failed the pose).  Returns the
+        unless the two agree within ``FB_MAX_PX`` x 4 px (LK has just failed the pose).  Returns the
         frame's features with that done, or None when re-acquisition is off or there is no keyframe;
         the front end's own features change only when the back end :meth:`adopt` s them."""
         if not self.cfg.reacquire or self._kf_pyr is None or int(frame.t_ns) != self._t_ns:
@@ -108,7 +108,7 @@ class ImageFrontEnd:
             uv, ok = track_lk_scaled(self._kf_pyr, self._left, kf_uv, self.cfg, uv, scale)
             ids, uv = ids[ok], uv[ok]
             _, i_state, i_new = np.intersect1d(self.ids, ids, assume_unique=True, return_indices=True)
-            agree = np.linalg.norm(self.uv[i_state] - uv[i_new], axis=1) <= 4 * self.cfg.fb_max_px
+            agree = np.linalg.norm(self.uv[i_state] - uv[i_new], axis=1) <= 4 * FB_MAX_PX
             keep = np.ones(len(self.ids), bool)
             fresh = np.ones(len(ids), bool)
             if keep_tracks:
@@ -265,12 +265,12 @@ class ImageFrontEnd:
             return None
         if rotation is None:  # fitted only when needed: with a back-end prior it is not
             fit = fit_inplane(*self._step) if self._step is not None else None
-            if fit is None or fit[1] < self.cfg.derotate_min_deg:
+            if fit is None or fit[1] < DEROTATE_MIN_DEG:
                 return None
             return fit[0]
         R = np.asarray(rotation, dtype=float)
         if (R.shape != (3, 3) or not np.all(np.isfinite(R))
-                or np.degrees(np.linalg.norm(log_so3(R))) < self.cfg.derotate_min_deg):
+                or np.degrees(np.linalg.norm(log_so3(R))) < DEROTATE_MIN_DEG):
             return None
         return rotation_homography(R, self.camera.K)
 

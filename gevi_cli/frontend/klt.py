@@ -20,7 +20,7 @@ from functools import cached_property
 import cv2
 import numpy as np
 
-from gevi_cli.frontend.config import FrontendConfig
+from gevi_cli.frontend.config import FB_MAX_PX, LK_EPS, LK_ITERS, LK_LEVELS, LK_SCALE_STEP, FrontendConfig
 
 
 @dataclass(frozen=True, eq=False)  # compared by identity: the image is an array
@@ -44,19 +44,19 @@ class Pyramid:
 
 
 def build_pyramid(img: np.ndarray, cfg: FrontendConfig) -> Pyramid:
-    """Handle for tracking from/into ``img`` (2-D uint8) with ``cfg.lk_window`` and ``cfg.lk_levels``."""
+    """Handle for tracking from/into ``img`` (2-D uint8) with ``cfg.lk_window`` and ``LK_LEVELS``."""
     if img is None:
         raise ValueError("image is None (unreadable or missing)")
     img = np.asarray(img)
     if img.ndim != 2 or img.dtype != np.uint8:
         raise ValueError(f"LK needs a 2-D uint8 image, got shape {img.shape} dtype {img.dtype}")
-    return Pyramid(np.ascontiguousarray(img), int(cfg.lk_window), int(cfg.lk_levels))
+    return Pyramid(np.ascontiguousarray(img), int(cfg.lk_window), int(LK_LEVELS))
 
 
 def lk_once(src: Pyramid, dst: Pyramid, uv: np.ndarray, guess: np.ndarray, cfg: FrontendConfig):
     """One OpenCV LK call (no checks): ``uv`` (n, 2) in ``src`` -> ``dst`` starting from ``guess``;
     returns the points (n, 2) float64 and OpenCV's status (n,) bool.  Float32 inside OpenCV."""
-    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, int(cfg.lk_iters), float(cfg.lk_eps))
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, int(LK_ITERS), float(LK_EPS))
     out, status, _ = cv2.calcOpticalFlowPyrLK(
         src.image, dst.image, uv.astype(np.float32).reshape(-1, 1, 2), guess.astype(np.float32).reshape(-1, 1, 2),
         winSize=(src.window, src.window), maxLevel=src.max_level, criteria=criteria,
@@ -76,7 +76,7 @@ def track_lk(pyr_prev: Pyramid, pyr_cur: Pyramid, uv_prev: np.ndarray, cfg: Fron
 
     Returns ``uv_cur`` (n, 2) float64 pixels (NaN where not ok) and ``ok`` (n,) bool: LK status in
     both directions, the result inside the image, and the forward-backward error
-    ``|back(fwd(uv)) - uv| < fb_max_px``.
+    ``|back(fwd(uv)) - uv| < FB_MAX_PX``.
     ``uv_guess`` (n, 2), default ``uv_prev``, is where the forward search starts.  The backward
     search starts at ``uv_cur`` moved back by the same prior displacement, so the check is as hard
     as the forward problem (starting it at ``uv_prev`` would let a wrong match pass trivially).
@@ -93,7 +93,7 @@ def track_lk(pyr_prev: Pyramid, pyr_cur: Pyramid, uv_prev: np.ndarray, cfg: Fron
         start = uv_cur[idx] - (guess[idx] - uv_prev[idx])
         uv_back, ok_back = lk_once(pyr_cur, pyr_prev, uv_cur[idx], start, cfg)
         fb = np.linalg.norm(uv_back - uv_prev[idx], axis=1)
-        ok[idx] = ok_back & (fb < cfg.fb_max_px)
+        ok[idx] = ok_back & (fb < FB_MAX_PX)
     uv_cur[~ok] = np.nan
     return uv_cur, ok
 
@@ -104,7 +104,7 @@ def track_lk_scaled(pyr_prev: Pyramid, pyr_cur: Pyramid, uv_prev: np.ndarray, cf
 
     LK fits a translation of its window, so a patch that grew by 1.3x or more (a near point at a
     large forward step: a fast car, a low frame rate) no longer matches and is lost or lands on a
-    look-alike.  The features are grouped by scale in steps of ``cfg.lk_scale_step`` (a factor); for
+    look-alike.  The features are grouped by scale in steps of ``LK_SCALE_STEP`` (a factor); for
     each group other than the unit one the previous image is resized by the group's scale (an affine
     warp, the translation putting the group's features at their guesses on average) and the group is
     tracked from that image, so LK sees patches of the right size.  The unit group, a feature whose
@@ -115,7 +115,7 @@ def track_lk_scaled(pyr_prev: Pyramid, pyr_cur: Pyramid, uv_prev: np.ndarray, cf
     guess = np.asarray(uv_guess, np.float64).reshape(-1, 2)
     n = len(uv_prev)
     uv, ok = np.full((n, 2), np.nan), np.zeros(n, bool)
-    step = np.log(float(cfg.lk_scale_step))
+    step = np.log(float(LK_SCALE_STEP))
     group = np.round(np.log(np.clip(np.asarray(scale, np.float64), 1e-3, 1e3)) / step)
     plain = ~np.isfinite(group) | (group == 0)
     h, w = pyr_cur.shape

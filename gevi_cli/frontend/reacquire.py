@@ -20,7 +20,14 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from gevi_cli.frontend.config import FrontendConfig
+from gevi_cli.frontend.config import (
+    REACQUIRE_FAST_THRESHOLD,
+    REACQUIRE_FEATURES,
+    REACQUIRE_MAX_HAMMING,
+    REACQUIRE_RADIUS_PX,
+    REACQUIRE_RATIO,
+    FrontendConfig,
+)
 from gevi_cli.observations import Prediction
 
 _PATCH = 31.0  # ORB's patch size (px at level 0): the keypoint size of a level-0 descriptor
@@ -39,7 +46,7 @@ def _orb(cfg: FrontendConfig, n_features: int) -> cv2.ORB:
     # FAST threshold low, the count capped: ORB keeps the n strongest (Harris score) corners, so the
     # threshold that counts follows the image's own contrast instead of a fixed grey-level step
     return cv2.ORB_create(nfeatures=int(n_features), scaleFactor=1.2, nlevels=8, edgeThreshold=19,
-                          patchSize=int(_PATCH), fastThreshold=int(cfg.reacquire_fast_threshold))
+                          patchSize=int(_PATCH), fastThreshold=int(REACQUIRE_FAST_THRESHOLD))
 
 
 def describe(image: np.ndarray, ids: np.ndarray, uv: np.ndarray, cfg: FrontendConfig) -> KeyframePatches:
@@ -61,13 +68,13 @@ def match(kf: KeyframePatches, image: np.ndarray, cfg: FrontendConfig,
     detections (FAST corners, ~1 px from the keyframe feature's own corner): a coarse position.
 
     ``predicted``: features' predicted pixels in ``image`` (ids and (k, 2) pixels); such a feature is matched only to a
-    detection within ``cfg.reacquire_radius_px`` of it.  A match needs a Hamming distance of at most
-    ``cfg.reacquire_max_hamming``, and, among the candidates it was allowed, the best distance below
-    ``cfg.reacquire_ratio`` times the second best; a detection claimed by two features goes to neither."""
+    detection within ``REACQUIRE_RADIUS_PX`` of it.  A match needs a Hamming distance of at most
+    ``REACQUIRE_MAX_HAMMING``, and, among the candidates it was allowed, the best distance below
+    ``REACQUIRE_RATIO`` times the second best; a detection claimed by two features goes to neither."""
     empty = (np.empty(0, np.int64), np.empty((0, 2)), np.empty(0))
     if len(kf.ids) == 0:
         return empty
-    orb = _orb(cfg, cfg.reacquire_features)
+    orb = _orb(cfg, REACQUIRE_FEATURES)
     kps = orb.detect(image, None)
     for k in kps:
         k.angle = 0.0  # upright, as the keyframe's descriptors
@@ -82,7 +89,7 @@ def match(kf: KeyframePatches, image: np.ndarray, cfg: FrontendConfig,
         mask = np.ones((len(kf.ids), len(pts)), np.uint8)
         _, rows, j = np.intersect1d(kf.ids, predicted.ids, assume_unique=True, return_indices=True)
         d2 = ((predicted.uv[j, None, :] - pts[None, :, :]) ** 2).sum(2)
-        mask[rows] = d2 <= float(cfg.reacquire_radius_px) ** 2
+        mask[rows] = d2 <= float(REACQUIRE_RADIUS_PX) ** 2
     knn = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(kf.desc, desc, k=2, mask=mask)
     n = len(kf.ids)
     best, second = np.full(n, np.inf), np.full(n, np.inf)
@@ -93,7 +100,7 @@ def match(kf: KeyframePatches, image: np.ndarray, cfg: FrontendConfig,
             col[cands[0].queryIdx] = cands[0].trainIdx
             if len(cands) > 1:
                 second[cands[0].queryIdx] = cands[1].distance
-    ok = (col >= 0) & (best <= cfg.reacquire_max_hamming) & (best < cfg.reacquire_ratio * second)
+    ok = (col >= 0) & (best <= REACQUIRE_MAX_HAMMING) & (best < REACQUIRE_RATIO * second)
     # one detection, one feature
     taken, counts = np.unique(col[ok], return_counts=True)
     ok &= ~np.isin(col, taken[counts > 1])

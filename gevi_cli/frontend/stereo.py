@@ -1,8 +1,8 @@
 """Left -> right matching on a rectified pair: LK from each left feature, checked both ways.
 
 Pixels of the rectified images; ``disparity = u_L - u_R`` (px, > 0 for points in front), depth
-``Z = fx * b / disparity`` (m).  A match must be forward-backward consistent (``fb_max_px``), lie on
-the left feature's row (``stereo_row_max_px``) and have its depth inside
+``Z = fx * b / disparity`` (m).  A match must be forward-backward consistent (``FB_MAX_PX``), lie on
+the left feature's row (``STEREO_ROW_MAX_PX``) and have its depth inside
 ``[min_depth_m, max_depth_m]``, i.e. ``fx b / max_depth_m <= d <= fx b / min_depth_m``.
 
 Search strategy (why a disparity ladder): LK converges from about +-30-40 px around the true
@@ -26,7 +26,14 @@ from dataclasses import replace
 import cv2
 import numpy as np
 
-from gevi_cli.frontend.config import FrontendConfig
+from gevi_cli.frontend.config import (
+    FB_MAX_PX,
+    LK_EPS,
+    STEREO_MAX_DEPTH_M,
+    STEREO_MIN_DEPTH_M,
+    STEREO_ROW_MAX_PX,
+    FrontendConfig,
+)
 from gevi_cli.frontend.klt import Pyramid, in_image, lk_once
 from gevi_cli.observations import RectifiedStereo
 
@@ -46,7 +53,7 @@ iterations, 1.8 after 10, and 1.3 of those still after 30 (then dropped as not c
 def disparity_gate(camera: RectifiedStereo, cfg: FrontendConfig) -> tuple[float, float]:
     """Accepted disparities (px): ``[fx b / max_depth_m, fx b / min_depth_m]``."""
     fb = camera.fx * camera.baseline
-    return fb / cfg.max_depth_m, fb / cfg.min_depth_m
+    return fb / STEREO_MAX_DEPTH_M, fb / STEREO_MIN_DEPTH_M
 
 
 def hypotheses(prior: float, d_max: float, step_px: float = STEP_PX, rungs: int = RUNGS) -> list[float]:
@@ -90,8 +97,8 @@ def refine_on_row(pyr_left: Pyramid, pyr_right: Pyramid, uv_left: np.ndarray, d0
     Level 0, the ``lk_window`` square, the right patch taken on the left feature's row: the model
     is ``L(u, v) = a R(u - d, v) + c`` (gain ``a`` and offset ``c`` fitted in closed form each
     iteration), solved inverse-compositionally (the left patch's horizontal Scharr gradient, as
-    OpenCV's LK uses the template's), steps clipped to 1 px, :data:`ROW_ITERS` iterations, ``lk_eps`` as LK.
-    Returns ``d`` and ``ok``: converged, with horizontal texture, and within ``stereo_row_max_px``
+    OpenCV's LK uses the template's), steps clipped to 1 px, :data:`ROW_ITERS` iterations, ``LK_EPS`` as LK.
+    Returns ``d`` and ``ok``: converged, with horizontal texture, and within ``STEREO_ROW_MAX_PX``
     of ``d0`` (the 2-D solution may slide that far along an oblique edge, no farther).
 
     Why (docs/method.md, "Real images"): on KITTI 06 the vertical component of the 2-D LK solution
@@ -125,8 +132,8 @@ def refine_on_row(pyr_left: Pyramid, pyr_right: Pyramid, uv_left: np.ndarray, d0
         res = gain[:, None] * img - tpl[active]
         step = np.clip(np.einsum("ij,ij->i", grad[active], res) / hess[active], -1.0, 1.0)
         d[active] += step
-        active = active[np.abs(step) >= cfg.lk_eps]
-    ok = textured & np.isfinite(d) & (np.abs(d - d0) < cfg.stereo_row_max_px)
+        active = active[np.abs(step) >= LK_EPS]
+    ok = textured & np.isfinite(d) & (np.abs(d - d0) < STEREO_ROW_MAX_PX)
     ok[active] = False  # not converged within ROW_ITERS
     return d, ok
 
@@ -160,12 +167,12 @@ def match_stereo(pyr_left: Pyramid, pyr_right: Pyramid, uv_left: np.ndarray, cam
         fwd, good = lk_once(pyr_left, pyr_right, src, src - shift, cfg)
         d = src[:, 0] - fwd[:, 0]
         good &= in_image(fwd, pyr_right.shape)
-        good &= (np.abs(fwd[:, 1] - src[:, 1]) < cfg.stereo_row_max_px) & (d >= d_lo) & (d <= d_hi)
+        good &= (np.abs(fwd[:, 1] - src[:, 1]) < STEREO_ROW_MAX_PX) & (d >= d_lo) & (d <= d_hi)
         idx = np.flatnonzero(good)
         if len(idx):
             # backward from the match, started symmetrically (shifted back by the same hypothesis)
             back, ok_back = lk_once(pyr_right, pyr_left, fwd[idx], fwd[idx] + shift, cfg)
-            fb_ok = ok_back & (np.linalg.norm(back - src[idx], axis=1) < cfg.fb_max_px)
+            fb_ok = ok_back & (np.linalg.norm(back - src[idx], axis=1) < FB_MAX_PX)
             acc = todo[idx[fb_ok]]
             uv_right[acc] = fwd[idx[fb_ok]]
             ok[acc] = True

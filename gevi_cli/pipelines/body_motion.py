@@ -12,7 +12,7 @@ import numpy as np
 from gevi_cli.estimators.preintegration import imu_segment, integrate_increments
 from gevi_cli.inertial.imu_stream import ImuStream
 from gevi_cli.inertial.standstill import GRAVITY
-from gevi_cli.pipelines.config import FusionConfig
+from gevi_cli.pipelines.config import ACC_ORDER, FusionConfig
 from gevi_cli.pipelines.inertial_state import FrameSample, ImuBiases
 from gevi_cli.pipelines.recent_motion import RecentMotion
 from gevi_cli.pipelines.types import OK
@@ -35,7 +35,7 @@ class BodyMotion:
         self.R_ic = T_B_C0[:3, :3]
         self.T_B_C0, self.T_C0_B = T_B_C0, np.linalg.inv(T_B_C0)
         self.frame_period = float(frame_period_s)
-        self.recent = RecentMotion(fusion.acc_window_s, fusion.acc_order)
+        self.recent = RecentMotion(fusion.acc_window_s, ACC_ORDER)
         self.gravity = WindowGravity(fusion.gravity_window_s) if fusion.gravity_window_s > 0 else None
         self.v_W = np.zeros(3)
 

@@ -25,7 +25,6 @@ class CurrentFeatureOdometry(KeyframeOdometry):
         self.verification = FivePointL1Verification(cfg.verify, self.camera)
 
     def estimate_T_ck(self, m: Matches, frame) -> np.ndarray:
-        R, t, fallback = tracked_pose6(m.p, m.cov_unit * self.sigma2, m.q, self.cfg.pnp, self.sigma2, self.camera.f,
-                                       self.far_points(m))
+        R, t, fallback = tracked_pose6(m.p, m.cov_unit * self.sigma2, m.q, self.cfg.pnp, self.sigma2, self.camera.f)
         self.fallbacks += int(fallback)
         return make_T(R, t)

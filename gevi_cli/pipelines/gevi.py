@@ -44,7 +44,7 @@ from gevi_cli.inertial.imu_stream import ImuStream
 from gevi_cli.inertial.standstill import GRAVITY
 from gevi_cli.pipelines.acc_bias import AccBiasTracker, InFlightBias
 from gevi_cli.pipelines.body_motion import BodyMotion
-from gevi_cli.pipelines.config import OdometryConfig
+from gevi_cli.pipelines.config import BA_PRIOR_SIGMA, BIAS_MAX_STD, MAX_MEDIAN_PX, OdometryConfig
 from gevi_cli.pipelines.inertial_init import Initialisation, Start
 from gevi_cli.pipelines.inertial_state import FrameSample, ImuBiases, tilt_of, yaw_of
 from gevi_cli.pipelines.odometry import KeyframeOdometry, Matches
@@ -93,9 +93,9 @@ class GeviOdometry(KeyframeOdometry):
         self.body = BodyMotion(imu, self.biases, T_B_C, frame_period_s, cfg.fusion)
         self.tilts = TiltWindow(cfg, imu.noise, frame_period_s, self.R_ic)
         # the horizontal accelerometer bias from yaw changes (acc_bias.py); it reads the window gravity
-        tracker = AccBiasTracker(cfg.fusion.bias_window_s, cfg.init.ba_prior_sigma, walk=imu.noise.acc_random_walk) \
+        tracker = AccBiasTracker(cfg.fusion.bias_window_s, BA_PRIOR_SIGMA, walk=imu.noise.acc_random_walk) \
             if cfg.fusion.bias_window_s > 0 and self.body.gravity is not None else None
-        self.in_flight = InFlightBias(tracker, cfg.fusion.bias_max_std)
+        self.in_flight = InFlightBias(tracker, BIAS_MAX_STD)
         self.six_verify = FivePointL1Verification(dataclasses.replace(cfg.verify, ransac="5pt"), self.camera)
         if cfg.verify.ransac == "3pt":
             self.gevi_verify = ThreePointVerification(cfg.verify, self.camera, self._levelling)
@@ -211,8 +211,7 @@ class GeviOdometry(KeyframeOdometry):
     # ---------------------------------------------------------------------------- pose step
     def estimate_T_ck(self, m: Matches, frame) -> np.ndarray:
         if self.plan.mode != GEVI:
-            R, t, fallback = tracked_pose6(m.p, m.cov_unit * self.sigma2, m.q, self.cfg.pnp, self.sigma2, self.camera.f,
-                                           self.far_points(m))
+            R, t, fallback = tracked_pose6(m.p, m.cov_unit * self.sigma2, m.q, self.cfg.pnp, self.sigma2, self.camera.f)
             self.fallbacks += int(fallback)
             return make_T(R, t)
         cov = m.cov_unit * self.sigma2
@@ -221,7 +220,7 @@ class GeviOdometry(KeyframeOdometry):
         R, t = self._gevi_pose(m, cov)
         f, pc = self.camera.f, self.cfg.pnp
         med = reprojection_median_px(R, t, m.p, m.q, f)
-        if pc.reverify and not med <= converged_limit_px(pc, self.sigma2, f):
+        if not med <= converged_limit_px(pc, self.sigma2, f):
             # CFO's re-verification (pose6.reverified) with the GeVI step; the tilt state is put back when
             # the second pose is not kept
             saved = self.tilts.saved()
@@ -230,7 +229,7 @@ class GeviOdometry(KeyframeOdometry):
                 self.tilts.restore(saved)
             else:
                 (R, t), med = again
-        if not np.isfinite(med) or med > pc.max_median_px:
+        if not np.isfinite(med) or med > MAX_MEDIAN_PX:
             raise TrackingFailure(f"median reprojection error {med:.2f} px after the GeVI pose step")
         return make_T(R, t)
 
@@ -262,7 +261,7 @@ class GeviOdometry(KeyframeOdometry):
         if self.T_w_last is not None:
             self.T_w_last = T_WV @ self.T_w_last
         poses = dict(self.pending)
-        s0 = (self.cfg.init.ba_prior_sigma / GRAVITY) ** 2  # the bias/tilt ambiguity floor (spec 9.6)
+        s0 = (BA_PRIOR_SIGMA / GRAVITY) ** 2  # the bias/tilt ambiguity floor (spec 9.6)
         kf_tilt = tilt_of(self.kf.T_w_k[:3, :3], self.R_ic) if self.kf is not None else None
         self.tilts.reset_tilts(tilt_of(res.T_w_c[:3, :3], self.R_ic), kf_tilt, s0)
         # the window since the keyframe, re-summarised with the biases now known
@@ -304,10 +303,9 @@ class GeviOdometry(KeyframeOdometry):
             # The epipolar BA refined the keyframe with the whole window's images; its roll/pitch is the
             # better relative tilt, the BCD's the gravity-anchored one.  A complementary blend keeps both
             # (the BA's alone drifts where vision is weak; the BCD's alone follows sustained accelerations):
-            # [PROPOSAL] gain ``fusion.kf_tilt_gravity_gain``.
+            # the gravity-anchored BCD tilt, written as the BA's plus the wrapped difference.
             ba_tilt = tilt_of(T[:3, :3], self.R_ic)
-            k = self.cfg.fusion.kf_tilt_gravity_gain
-            self.tilts.kf_tilt = ba_tilt + k * np.array([est.wrap_angle(d) for d in self.tilts.tilt - ba_tilt])
+            self.tilts.kf_tilt = ba_tilt + np.array([est.wrap_angle(d) for d in self.tilts.tilt - ba_tilt])
         # keep R_WK exactly levelled by the keyframe tilt (the 4-DOF model's assumption)
         yaw = yaw_of(T[:3, :3] @ self.R_ic.T)
         R_before = T[:3, :3].copy()

@@ -17,7 +17,19 @@ from gevi_cli import estimators as est
 from gevi_cli.frontend.image_motion import fitted_flow_px
 from gevi_cli.inertial.imu_stream import ImuStream
 from gevi_cli.inertial.standstill import GRAVITY, rest_limits_hold, tilt_from_specific_force
-from gevi_cli.pipelines.config import InitConfig
+from gevi_cli.pipelines.config import (
+    BA_PRIOR_SIGMA,
+    INIT_STRIDE,
+    MAX_WINDOW_S,
+    POSE_SIGMA_M,
+    STILL_LAG_S,
+    STILL_MAX_ACC_STD,
+    STILL_MAX_FLOW_PX,
+    STILL_MAX_GRAVITY_ERR,
+    STILL_MAX_GYRO_STD,
+    STILL_PERSIST,
+    InitConfig,
+)
 from gevi_cli.pipelines.types import OK
 
 MIN_FLOW_FEATURES = 20
@@ -94,13 +106,12 @@ class Initialisation:
         return Start(R_WV, b_g=g.mean(0))
 
     def _from_motion(self, res, elapsed: float) -> Start | None:
-        ic = self.cfg
-        poses = self.held[::max(ic.stride, 1)]
+        poses = self.held[::INIT_STRIDE]
         try:
             r = self._stereo_imu_init([p[1] for p in poses], [p[2] for p in poses])
         except est.EstimatorError as err:
-            if elapsed + 0.5 < ic.max_window_s:
-                self._next_try = res.index + max(ic.stride, 1) * 5
+            if elapsed + 0.5 < MAX_WINDOW_S:
+                self._next_try = res.index + INIT_STRIDE * 5
                 self.info = {"failed_attempt": str(err)}
                 return None
             # last resort: gravity from the mean specific force (zero mean acceleration assumed)
@@ -116,9 +127,8 @@ class Initialisation:
     def _stereo_imu_init(self, t_ns: list[int], T_w_c: list[np.ndarray], b_g0: np.ndarray | None = None):
         """Spec 9's stereo-IMU initialisation over the rectified-cam0 poses ``T_w_c`` stamped ``t_ns`` (from
         the gyro bias ``b_g0``, default 0); raises EstimatorError."""
-        ic = self.cfg
-        opts = est.InitOptions(ba_prior_sigma=ic.ba_prior_sigma, acc_noise_density=self.imu.noise.acc_noise_density,
-                               pose_pos_sigma=ic.pose_sigma_m, b_g0=b_g0)
+        opts = est.InitOptions(ba_prior_sigma=BA_PRIOR_SIGMA, acc_noise_density=self.imu.noise.acc_noise_density,
+                               pose_pos_sigma=POSE_SIGMA_M, b_g0=b_g0)
         return est.stereo_imu_init(np.array(t_ns, dtype=np.int64), np.array([T[:3, :3] for T in T_w_c]),
                                    np.array([T[:3, 3] for T in T_w_c]), self.imu.t_ns, self.imu.gyro, self.imu.acc,
                                    self.R_ic, self.p_ic, opts)
@@ -132,8 +142,8 @@ class Initialisation:
             self.still = False
             return None
         # the end of a standstill is seen late (a smooth start of motion stays below the image and IMU
-        # limits for a while), so the last ``init.still_lag_s`` do not enter the bias [PROPOSAL]
-        i0, i1 = self.imu.span(self.t_first, int(ts[-1]) - int(self.cfg.still_lag_s * 1e9))
+        # limits for a while), so the last ``STILL_LAG_S`` do not enter the bias [PROPOSAL]
+        i0, i1 = self.imu.span(self.t_first, int(ts[-1]) - int(STILL_LAG_S * 1e9))
         if (self.imu.t_ns[i1 - 1] - ts[0] if i1 - i0 >= 2 else 0) < int(0.5 * self.cfg.still_min_s * 1e9):
             i1 = i0 + len(ts)
         self.info["standstill_s"] = (ts[-1] - ts[0]) * 1e-9
@@ -141,16 +151,16 @@ class Initialisation:
 
     def _images_at_rest(self, obs) -> bool:
         """The images say the platform is at rest: the image motion since the reference frame
-        (``_image_flow_px``) stays within ``init.still_max_flow_px``, or exceeds it on fewer than
-        ``init.still_persist`` consecutive frames.
+        (``_image_flow_px``) stays within ``STILL_MAX_FLOW_PX``, or exceeds it on fewer than
+        ``STILL_PERSIST`` consecutive frames.
 
         The flow is measured on the images themselves, not through the poses: on a turbid start the
         chained poses of a keyframe every frame read pixels of motion at rest, and a moving-start
         initialisation at rest takes a wrong gyro bias.  A real start of motion grows monotonically and
-        is caught ``still_persist - 1`` frames later, well inside ``still_min_s``."""
-        moved = self._image_flow_px(obs) > self.cfg.still_max_flow_px
+        is caught ``STILL_PERSIST - 1`` frames later, well inside ``still_min_s``."""
+        moved = self._image_flow_px(obs) > STILL_MAX_FLOW_PX
         self._moving_run = self._moving_run + 1 if moved else 0
-        return self._moving_run < max(self.cfg.still_persist, 1)
+        return self._moving_run < STILL_PERSIST
 
     def _image_flow_px(self, obs) -> float:
         """Image motion (px) since the reference frame: :func:`~gevi_cli.frontend.image_motion.fitted_flow_px`
@@ -181,12 +191,11 @@ class Initialisation:
         (``try_start``, then ``standstill_gyro_bias``), and the images' "moving" counter counts it once."""
         if self._still_eval is not None and self._still_eval[0] == res.index:
             return self._still_eval[1]
-        ic = self.cfg
         i0, i1 = self.imu.span(self.t_first, res.t_ns)
         ts, g, a = self.imu.t_ns[i0:i1], self.imu.gyro[i0:i1], self.imu.acc[i0:i1]
         # (the statistics from the stream's prefix sums: this window grows with the standstill)
         rest = self._images_at_rest(obs) and (len(ts) < 2 or rest_limits_hold(
-            *self.imu.moments.window(i0, i1), ic.still_max_gyro_std, ic.still_max_acc_std, ic.still_max_gravity_err))
+            *self.imu.moments.window(i0, i1), STILL_MAX_GYRO_STD, STILL_MAX_ACC_STD, STILL_MAX_GRAVITY_ERR))
         self._still_eval = (res.index, (rest, (ts, g, a)))
         return rest, (ts, g, a)
 
@@ -198,7 +207,7 @@ class Initialisation:
         adopted (W, the tilts ``tilt`` and the gyro bias ``b_g`` of the standstill stay) [PROPOSAL].
         Returns ``b_a`` unchanged until then, when rejected, and after."""
         ic = self.cfg
-        if not ic.refine_acc_bias or self.still or self.info.get("method") != "standstill" \
+        if self.still or self.info.get("method") != "standstill" \
                 or "acc_bias_refined" in self.info:
             return b_a
         if res.status != OK:
@@ -208,7 +217,7 @@ class Initialisation:
         self._bias_poses.append((res.t_ns, res.T_w_c.copy()))
         if not self._bias_poses or (self._bias_poses[-1][0] - self._bias_poses[0][0]) * 1e-9 < ic.window_s:
             return b_a
-        poses = self._bias_poses[::max(ic.stride, 1)]
+        poses = self._bias_poses[::INIT_STRIDE]
         try:
             r = self._stereo_imu_init([p[0] for p in poses], [p[1] for p in poses], b_g0=b_g)
         except est.EstimatorError as err:
@@ -218,7 +227,7 @@ class Initialisation:
         info = {"at_s": (res.t_ns - self.t_first) * 1e-9, "b_a": r.b_a.tolist(), "gravity_angle_deg": np.degrees(angle)}
         # consistency with the standstill: the bias may move gravity by at most the bias/tilt ambiguity
         # (3 prior sigma / g) and must itself be plausible under its prior
-        limit = 3.0 * ic.ba_prior_sigma
+        limit = 3.0 * BA_PRIOR_SIGMA
         if angle > limit / GRAVITY or np.linalg.norm(r.b_a) > limit:
             info["rejected"] = f"inconsistent with the standstill (limit {limit:g} m/s^2)"
         else:

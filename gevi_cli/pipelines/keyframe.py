@@ -47,7 +47,7 @@ def make_keyframe(index: int, t_ns: int, T_w_k: np.ndarray, stereo: StereoObs, c
                   min_depth_m: float, max_depth_m: float, min_disparity_px: float = 0.0,
                   fill_points: int = 0, sigma_px: float = 0.0, disparity_offset_px: float = 0.0) -> Keyframe:
     """Triangulate ``stereo`` (spec 4) and keep the points inside the depth gate and with at least
-    ``min_disparity_px`` of disparity.  When fewer than ``fill_points`` pass, the points beyond that
+    ``min_disparity_px`` of disparity.  When fewer than ``fill_points`` (the pipeline: ``FILL_POINTS``) pass, the points beyond that
     far gate are kept too (ORB-SLAM's stereo keyframes take far points while they have fewer than 100
     near ones), so that a scene whose texture is all far away (a highway, open water) still has points
     to track; their covariance carries their depth uncertainty.  A filling point's disparity must

@@ -22,7 +22,15 @@ import numpy as np
 from gevi_cli import estimators as est
 from gevi_cli.frontend import FrontEnd, Prediction
 from gevi_cli.geometry import invert_pose, orthonormal_pose
-from gevi_cli.pipelines.config import OdometryConfig
+from gevi_cli.pipelines.config import (
+    FILL_POINTS,
+    MIN_KF_POINTS,
+    MIN_PNP_POINTS,
+    NOISE_DEFAULT_PX,
+    NOISE_MAX_PX,
+    NOISE_MIN_PX,
+    OdometryConfig,
+)
 from gevi_cli.pipelines.disparity_offset import DisparityOffset
 from gevi_cli.pipelines.keyframe import Keyframe, make_keyframe
 from gevi_cli.pipelines.local_ba import WindowFrame, window_ba
@@ -66,7 +74,7 @@ class KeyframeOdometry:
         self._final: list[tuple[int, np.ndarray]] = []
         self._online: list[tuple[int, np.ndarray]] | None = None
         self.index = -1
-        self.sigma2 = (cfg.noise.default_px / self.camera.f) ** 2
+        self.sigma2 = (NOISE_DEFAULT_PX / self.camera.f) ** 2
         self.sigma2_valid = False
         self.T_w_last: np.ndarray | None = None
         self.velocity = np.eye(4)  # T_{prev,cur} of the last tracked step
@@ -93,13 +101,6 @@ class KeyframeOdometry:
         self._bitgen.state = self._bitgen_start
         self._bitgen.advance(self.index << 64)
         return self._rng
-
-    def far_points(self, m: Matches) -> np.ndarray | None:
-        """The matches whose keyframe point lies beyond ``pnp.far_baselines`` stereo baselines (n,) bool, or
-        None when the rule is off.  In normalized coordinates the disparity is ``baseline / Z``, so the
-        test ``z_x - y_x < 1 / far_baselines`` holds for every rig."""
-        nb = self.cfg.pnp.far_baselines
-        return None if nb <= 0 else (m.z[:, 0] - m.y[:, 0]) < 1.0 / nb
 
     # ------------------------------------------------------------------ to be provided by pipelines
     def estimate_T_ck(self, m: Matches, frame) -> np.ndarray:  # pragma: no cover - abstract
@@ -326,11 +327,10 @@ class KeyframeOdometry:
         self._set_sigma2(s2)
 
     def _set_sigma2(self, s2: float) -> None:
-        cfg = self.cfg.noise
         if not np.isfinite(s2) or s2 <= 0:
             return
         f = self.camera.f
-        lo, hi = (cfg.min_px / f) ** 2, (cfg.max_px / f) ** 2
+        lo, hi = (NOISE_MIN_PX / f) ** 2, (NOISE_MAX_PX / f) ** 2
         self.sigma2 = float(np.clip(s2, lo, hi))
         self.sigma2_valid = True
 
@@ -338,13 +338,13 @@ class KeyframeOdometry:
         t0 = time.perf_counter()
         m = self._match(ids, q_all)
         n_match = len(m.ids)
-        if n_match < self.cfg.pnp.min_points:
+        if n_match < MIN_PNP_POINTS:
             raise TrackingFailure(f"only {n_match} keyframe points tracked")
         keep = self.verification(m.z, m.q, m.p, self.frame_rng())
         m = m.subset(keep)
         t1 = time.perf_counter()
         timings["verify"] = t1 - t0
-        if len(m.ids) < self.cfg.pnp.min_points:
+        if len(m.ids) < MIN_PNP_POINTS:
             raise TrackingFailure(f"only {len(m.ids)} of {n_match} matches pass verification")
         self._update_sigma2(m.z, m.q)
         t2 = time.perf_counter()
@@ -361,13 +361,11 @@ class KeyframeOdometry:
     def _keyframe_rule(self, res: FrameResult, disp_px: float) -> str:
         """Why the tracked frame ``res`` becomes a keyframe ("": it does not): "inliers" (fewer verified
         matches than ``min_tracked_ratio`` of the keyframe's points or ``min_tracked``), "displacement" (the
-        mean image displacement since the keyframe), "frames" (``max_frames`` since it)."""
+        mean image displacement since the keyframe)."""
         k = self.cfg.keyframe
         if res.n_inliers < max(k.min_tracked_ratio * len(self.kf), k.min_tracked):
             return "inliers"
-        if disp_px > k.max_mean_disp_px:
-            return "displacement"
-        return "frames" if k.max_frames and res.index - self.kf.index >= k.max_frames else ""
+        return "displacement" if disp_px > k.max_mean_disp_px else ""
 
     def _insert_keyframe(self, frame, res: FrameResult, timings) -> None:
         cfg = self.cfg
@@ -376,7 +374,7 @@ class KeyframeOdometry:
                         for k, v in self.frontend.timings.items()})
         new = make_keyframe(res.index, res.t_ns, res.T_w_c, stereo, self.camera, cfg.triangulation.min_depth_m,
                             cfg.triangulation.max_depth_m, cfg.triangulation.min_disparity_px,
-                            cfg.triangulation.fill_points, float(np.sqrt(self.sigma2) * self.camera.f),
+                            FILL_POINTS, float(np.sqrt(self.sigma2) * self.camera.f),
                             self.disparity_offset.value if self.disparity_offset is not None else 0.0)
         if cfg.noise.method == "stereo" and len(new) >= 9:
             try:
@@ -390,7 +388,7 @@ class KeyframeOdometry:
             if T_w_new is not None:
                 new.T_w_k = T_w_new
         self._final, self.pending = self.pending, []
-        if len(new) >= cfg.triangulation.min_points:
+        if len(new) >= MIN_KF_POINTS:
             self.kf = new
             res.keyframe = True
         elif self.kf is None or res.status != OK:

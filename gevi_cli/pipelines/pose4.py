@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 
 from gevi_cli import estimators as est
-from gevi_cli.pipelines.config import OdometryConfig
+from gevi_cli.pipelines.config import FALLBACK_MIN_PX, FALLBACK_SIGMAS, MIN_PARALLAX_PX, OdometryConfig
 from gevi_cli.pipelines.pose6 import opencv_pnp, reprojection_median_px
 from gevi_cli.pipelines.verification import TrackingFailure
 
@@ -22,12 +22,12 @@ def pose4(m, cov, L_k, L_c, camera, cfg: OdometryConfig, sigma2: float) -> tuple
     coordinate rho_3 = h of every point the same, x = (0, 0, 0, 0, -h) solves A x = b exactly (it
     maps every point to the camera centre), so with noise the estimate mixes the true and the
     spurious solution (psi off by pi, all points behind the camera).  As for the 6-DOF step
-    (pose6.estimate_pose6), when the median reprojection error exceeds ``pnp.fallback_sigmas`` noise
+    (pose6.estimate_pose6), when the median reprojection error exceeds ``FALLBACK_SIGMAS`` noise
     std, the GN step is redone from SQPnP projected on the 4-DOF model and the better kept.
     """
-    f, pc = camera.f, cfg.pnp
+    f = camera.f
     parallax_px = float(np.median(np.linalg.norm(m.q - m.z, axis=1))) * f
-    use_gn = parallax_px >= cfg.verify.min_parallax_px  # below: left epipolar lines undefined (t ~ 0)
+    use_gn = parallax_px >= MIN_PARALLAX_PX  # below: left epipolar lines undefined (t ~ 0)
 
     def gn(psi, t):
         if not use_gn:
@@ -43,8 +43,8 @@ def pose4(m, cov, L_k, L_c, camera, cfg: OdometryConfig, sigma2: float) -> tuple
         e_best = err(*best)
     except est.EstimatorError:
         pass
-    limit = max(pc.fallback_sigmas * np.sqrt(sigma2) * f, pc.fallback_min_px)
-    if e_best > limit and pc.fallback_sigmas > 0:
+    limit = max(FALLBACK_SIGMAS * np.sqrt(sigma2) * f, FALLBACK_MIN_PX)
+    if e_best > limit:
         try:
             R6, t6 = opencv_pnp(m.p, m.q, cv2.SOLVEPNP_SQPNP, refine=False)
             M = L_c @ R6 @ L_k.T  # = Rz(psi) for an exact 4-DOF pose

@@ -1,7 +1,7 @@
 """Keyframe -> current 6-DOF pose from triangulated keyframe points (spec 5) and its ablations.
 
 ``be-w`` is the CurrentFeature estimator: Bias-Eli PnP (spec 5.2-5.3) + the weighted LM step of
-5.4 (the paper's one, and more while a step is longer than ``pnp.step_tol``).  ``be`` stops after
+5.4 (the paper's one, and more while a step is longer than ``STEP_TOL``).  ``be`` stops after
 the bias-eliminated linear step, ``ls`` uses the plain CPnP least squares (no bias elimination) +
 the same weighted steps, so the two ablations isolate the two ingredients.  ``epnp``/``sqpnp`` are
 the textbook alternative: OpenCV's EPnP / SQPnP followed by OpenCV's (unweighted, iterated) LM
@@ -13,41 +13,48 @@ import cv2
 import numpy as np
 
 from gevi_cli import estimators as est
-from gevi_cli.pipelines.config import PnPConfig
+from gevi_cli.pipelines.config import (
+    CHI2_GATE,
+    FALLBACK_MIN_PX,
+    FALLBACK_SIGMAS,
+    MAX_MEDIAN_PX,
+    MAX_REFINE_STEPS,
+    MIN_PNP_POINTS,
+    REFINE_STEPS,
+    REVERIFY_SIGMAS,
+    STEP_TOL,
+    PnPConfig,
+)
 from gevi_cli.pipelines.verification import TrackingFailure
 
 
-def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig, sigma2: float, f: float = 1.0,
-                   far: np.ndarray | None = None):
+def estimate_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig, sigma2: float, f: float = 1.0):
     """``(R_ck, t_ck, used_fallback)``: maps keyframe-left points ``p`` (n, 3, m) onto current
     normalized ``q`` (n, 2).
 
     ``cov`` (n, 3, 3) point covariances (normalized-noise units already applied); ``sigma2`` the
-    normalized image-noise variance; ``f`` the focal length (px) for the fallback test; ``far`` (n,)
-    bool: the points beyond ``cfg.far_baselines``, which the weighted steps see by bearing only
-    (:func:`gevi_cli.estimators.bearing_only`; the linear step keeps their stereo covariance).
+    normalized image-noise variance; ``f`` the focal length (px) for the fallback test.
 
     The CPnP linear model (spec 5.1) is degenerate for coplanar points (a pool floor seen from
     above: measured median reprojection errors of 5-13 px after the step on a planar render).  So for
     ``be-w``/``ls``, when the refined pose's median reprojection error exceeds
-    ``cfg.fallback_sigmas`` times the image noise (at least ``cfg.fallback_min_px``), the step is
+    ``FALLBACK_SIGMAS`` times the image noise (at least ``FALLBACK_MIN_PX``), the step is
     redone from SQPnP (spec 5.5 [PROPOSAL]: "any robust PnP
     followed by LM") and the better of the two is kept.  Raises :class:`TrackingFailure`.
     """
-    R, t, fallback, _ = _pose6_and_median(p, cov, q, cfg, sigma2, f, far)
+    R, t, fallback, _ = _pose6_and_median(p, cov, q, cfg, sigma2, f)
     return R, t, fallback
 
 
-def _pose6_and_median(p, cov, q, cfg: PnPConfig, sigma2: float, f: float, far=None):
+def _pose6_and_median(p, cov, q, cfg: PnPConfig, sigma2: float, f: float):
     """:func:`estimate_pose6` and the median reprojection error (px) of its pose over all matches
     when the fallback test had to compute it (None otherwise), so the tracking gates need not
     compute it again."""
-    cov_w = _weighted_cov(p, cov, far)
-    if cfg.method not in ("be-w", "ls") or cfg.fallback_sigmas <= 0:
-        R, t = _estimate(p, cov, cov_w, q, cfg, sigma2)
+    if cfg.method not in ("be-w", "ls") or FALLBACK_SIGMAS <= 0:
+        R, t = _estimate(p, cov, q, cfg, sigma2)
         return R, t, False, None
     try:
-        R, t = _estimate(p, cov, cov_w, q, cfg, sigma2)
+        R, t = _estimate(p, cov, q, cfg, sigma2)
         err = reprojection_median_px(R, t, p, q, f)
         first_failure = None
     except TrackingFailure as failure:  # e.g. the step from a degenerate linear start put points behind
@@ -56,7 +63,7 @@ def _pose6_and_median(p, cov, q, cfg: PnPConfig, sigma2: float, f: float, far=No
     if err <= converged_limit_px(cfg, sigma2, f):
         return R, t, False, err
     try:
-        R2, t2 = _weighted_steps(*opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False), p, cov_w, q, cfg, sigma2)
+        R2, t2 = _weighted_steps(*opencv_pnp(p, q, cv2.SOLVEPNP_SQPNP, refine=False), p, cov, q, cfg, sigma2)
         err2 = reprojection_median_px(R2, t2, p, q, f)
     except (est.EstimatorError, cv2.error, TrackingFailure):
         err2 = float("inf")
@@ -69,20 +76,15 @@ def _pose6_and_median(p, cov, q, cfg: PnPConfig, sigma2: float, f: float, far=No
 
 def converged_limit_px(cfg: PnPConfig, sigma2: float, f: float) -> float:
     """Median reprojection error (px) above which a pose is not the converged fit of its matches:
-    ``cfg.fallback_sigmas`` noise std, at least ``cfg.fallback_min_px``.  The median |r| of 2-D
+    ``FALLBACK_SIGMAS`` noise std, at least ``FALLBACK_MIN_PX``.  The median |r| of 2-D
     Gaussian noise is 1.18 sigma, so well above it the steps have not converged (SQPnP fallback) or a
     minority of outliers drags the pose (re-verification)."""
-    return max(cfg.fallback_sigmas * np.sqrt(sigma2) * f, cfg.fallback_min_px)
+    return max(FALLBACK_SIGMAS * np.sqrt(sigma2) * f, FALLBACK_MIN_PX)
 
 
-def _weighted_cov(p, cov, far):
-    """The point covariances the weighted steps use: ``cov`` with the ``far`` points' depth unknown."""
-    return cov if far is None else est.bearing_only(p, cov, far)
 
-
-def _estimate(p, cov, cov_w, q, cfg: PnPConfig, sigma2: float):
-    """The pose step of ``cfg.method``: the linear step with the stereo covariances ``cov``, the weighted
-    steps with ``cov_w``."""
+def _estimate(p, cov, q, cfg: PnPConfig, sigma2: float):
+    """The pose step of ``cfg.method`` with the stereo covariances ``cov``."""
     try:
         if cfg.method in ("epnp", "sqpnp"):
             return opencv_pnp(p, q, cv2.SOLVEPNP_EPNP if cfg.method == "epnp" else cv2.SOLVEPNP_SQPNP, refine=True)
@@ -92,7 +94,7 @@ def _estimate(p, cov, cov_w, q, cfg: PnPConfig, sigma2: float):
         else:
             R, t = est.pnp6_be(p, cov, q, weights=w)
         if cfg.method in ("be-w", "ls"):
-            R, t = _weighted_steps(R, t, p, cov_w, q, cfg, sigma2)
+            R, t = _weighted_steps(R, t, p, cov, q, cfg, sigma2)
         return R, t
     except est.EstimatorError as err:
         raise TrackingFailure(f"{cfg.method}: {err}") from None
@@ -105,15 +107,15 @@ def _weighted_steps(R, t, p, cov, q, cfg: PnPConfig, sigma2: float):
 
     S2's one step is efficient when the start lies within the noise of the optimum (a
     sqrt(n)-consistent start).  Whether it did is measured by the step itself: ``delta^T H delta`` is
-    its squared length in standard deviations of the pose.  Above ``cfg.step_tol`` the start was
+    its squared length in standard deviations of the pose.  Above ``STEP_TOL`` the start was
     farther than the one-step argument allows (a planar floor, where the linear model is
     degenerate), so the steps go on until one is that short [PROPOSAL].  On the 8 sweep renders this
     took 1.7-2.6 steps per frame on average and halved pool-easy's tracking error (docs/method.md 5.4).
     """
-    s2q = sigma2 if cfg.current_noise else 0.0
-    for k in range(max(1, cfg.max_refine_steps, cfg.refine_steps)):
+    s2q = sigma2
+    for k in range(MAX_REFINE_STEPS):
         R, t, m = est.pnp6_refine(R, t, p, cov, q, sigma2_q=s2q, return_step=True)
-        if k + 1 >= max(1, cfg.refine_steps) and (cfg.step_tol <= 0 or m <= cfg.step_tol):
+        if k + 1 >= REFINE_STEPS and (STEP_TOL <= 0 or m <= STEP_TOL):
             break
     return R, t
 
@@ -171,15 +173,15 @@ def reverified(p: np.ndarray, q: np.ndarray, med: float, cfg: PnPConfig, sigma2:
 
     Outliers that the epipolar verification cannot see (a group shifted along its epipolar lines:
     measured on pool-hard_s2, 9 of 63 tracks 38 px off; wrong stereo depths) drag every least-squares
-    pose.  OpenCV's AP3P RANSAC on the reprojection error (``cfg.reverify_sigmas`` noise std, at least
+    pose.  OpenCV's AP3P RANSAC on the reprojection error (``REVERIFY_SIGMAS`` noise std, at least
     1 px) finds them; ``pose_of(keep)`` redoes the pose step on the inliers and returns a tuple whose
     first two items are ``R, t``.  Returned, with its median reprojection error over *all* matches,
     only when that error at least halves ``med`` (a minority of gross outliers drags the pose of all:
     without them the median collapses; tracks merely noisier than sigma_hat do not do that -- KITTI
     04's exported colour tracks: 3 frames, 60 % kept, the median barely lower).
     """
-    keep = pnp_ransac_inliers(p, q, max(cfg.reverify_sigmas * np.sqrt(sigma2), 1.0 / f))
-    if keep is None or not cfg.min_points <= keep.sum() < len(p):
+    keep = pnp_ransac_inliers(p, q, max(REVERIFY_SIGMAS * np.sqrt(sigma2), 1.0 / f))
+    if keep is None or not MIN_PNP_POINTS <= keep.sum() < len(p):
         return None
     try:
         pose = pose_of(keep)
@@ -191,28 +193,26 @@ def reverified(p: np.ndarray, q: np.ndarray, med: float, cfg: PnPConfig, sigma2:
     return None
 
 
-def tracked_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig, sigma2: float, f: float,
-                  far: np.ndarray | None = None):
+def tracked_pose6(p: np.ndarray, cov: np.ndarray, q: np.ndarray, cfg: PnPConfig, sigma2: float, f: float):
     """The 6-DOF tracking step of the pipelines: (R_ck, t_ck, fell_back) or :class:`TrackingFailure`.
 
     :func:`estimate_pose6`, then the sanity gates: finite, median reprojection error below
-    ``cfg.max_median_px``.  CurrentFeature Odometry uses it for every frame, GeVI before its
+    ``MAX_MEDIAN_PX``.  CurrentFeature Odometry uses it for every frame, GeVI before its
     initialisation and where the IMU has a gap.
     """
-    R, t, fallback, med = _pose6_and_median(p, cov, q, cfg, sigma2, f, far)
+    R, t, fallback, med = _pose6_and_median(p, cov, q, cfg, sigma2, f)
     if not _finite(R, t):
         raise TrackingFailure("non-finite pose")
     if med is None:
         med = reprojection_median_px(R, t, p, q, f)
-    if cfg.reverify and med > converged_limit_px(cfg, sigma2, f):
+    if med > converged_limit_px(cfg, sigma2, f):
         again = reverified(p, q, med, cfg, sigma2, f,
-                           lambda keep: estimate_pose6(p[keep], cov[keep], q[keep], cfg, sigma2, f,
-                                                       None if far is None else far[keep]))
+                           lambda keep: estimate_pose6(p[keep], cov[keep], q[keep], cfg, sigma2, f))
         if again is not None:
             (R, t, fallback), med = again
-    if cfg.chi2_gate > 0 and cfg.method in ("be-w", "ls"):
-        R, t, med = _chi2_refit(R, t, p, _weighted_cov(p, cov, far), q, cfg, sigma2, f, med)
-    if med > cfg.max_median_px:
+    if CHI2_GATE > 0 and cfg.method in ("be-w", "ls"):
+        R, t, med = _chi2_refit(R, t, p, cov, q, cfg, sigma2, f, med)
+    if med > MAX_MEDIAN_PX:
         raise TrackingFailure(f"median reprojection error {med:.2f} px after the pose step")
     return R, t, fallback
 
@@ -227,7 +227,7 @@ def _chi2_refit(R, t, p, cov, q, cfg: PnPConfig, sigma2: float, f: float, med: f
     """Matches the weighted model cannot explain out, the weighted steps again on the rest [PROPOSAL].
 
     The weights of spec 5.4 say how far each residual may be: ``r^T Sigma_bar^-1 r`` is chi-square
-    with 2 dof.  A match far beyond ``cfg.chi2_gate`` is not noise but a wrong stereo depth, which no
+    with 2 dof.  A match far beyond ``CHI2_GATE`` is not noise but a wrong stereo depth, which no
     2D-2D verification can see (its tracks are right) and the l1 drop of a fixed fraction removes
     only in part: on pool-hard_s1 a third of the keyframe stereo matches are more than 1 px off and
     18 % more than 10 px (``scripts/track_bias.py``), and every tracked rotation there is off by the
@@ -236,14 +236,14 @@ def _chi2_refit(R, t, p, cov, q, cfg: PnPConfig, sigma2: float, f: float, med: f
     until the set stops changing.  Returns ``(R, t, median reprojection error px over all matches)``;
     the pose stays as it was when too few matches would remain or a step fails.
     """
-    s2q = sigma2 if cfg.current_noise else 0.0
+    s2q = sigma2
     kept = np.ones(len(p), dtype=bool)
     for _ in range(CHI2_ROUNDS):
         try:
-            keep = est.pnp6_whitened_sq(R, t, p, cov, q, s2q) <= cfg.chi2_gate
+            keep = est.pnp6_whitened_sq(R, t, p, cov, q, s2q) <= CHI2_GATE
         except est.EstimatorError:
             break
-        if np.array_equal(keep, kept) or keep.sum() < cfg.min_points:
+        if np.array_equal(keep, kept) or keep.sum() < MIN_PNP_POINTS:
             break
         try:
             R2, t2 = _weighted_steps(R, t, p[keep], cov[keep], q[keep], cfg, sigma2)

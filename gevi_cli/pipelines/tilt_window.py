@@ -18,7 +18,18 @@ import numpy as np
 from gevi_cli import estimators as est
 from gevi_cli.inertial.imu_stream import ImuNoise
 from gevi_cli.inertial.standstill import GRAVITY
-from gevi_cli.pipelines.config import OdometryConfig
+from gevi_cli.pipelines.config import (
+    BA_PRIOR_SIGMA,
+    BCD_LM_ITERS,
+    BCD_MAX_ITER,
+    CHI2_GATE,
+    KF_TILT_FLOOR_DEG,
+    MAX_WINDOW_FRAMES,
+    MIN_PNP_POINTS,
+    SIGMA_HI,
+    SIGMA_MEMORY_S,
+    OdometryConfig,
+)
 from gevi_cli.pipelines.inertial_state import FrameSample
 from gevi_cli.pipelines.verification import TrackingFailure
 
@@ -60,8 +71,8 @@ class TiltWindow:
 
     def take_keyframe_tilt(self) -> None:
         """The current tilt becomes the keyframe tilt, its covariance (floored at
-        ``fusion.kf_tilt_floor_deg`` per eigen-direction) the prior of the next windows."""
-        floor = np.radians(self.cfg.fusion.kf_tilt_floor_deg) ** 2
+        ``KF_TILT_FLOOR_DEG`` per eigen-direction) the prior of the next windows."""
+        floor = np.radians(KF_TILT_FLOOR_DEG) ** 2
         cov = self.tilt_cov if np.all(np.isfinite(self.tilt_cov)) else np.eye(2) * floor
         w, V = np.linalg.eigh(0.5 * (cov + cov.T))
         self.kf_tilt, self.kf_tilt_cov = self.tilt.copy(), (V * np.maximum(w, floor)) @ V.T
@@ -85,11 +96,11 @@ class TiltWindow:
 
     def note_innovation(self, cur: FrameSample, tilt_pred: np.ndarray) -> None:
         """The current frame's innovation (its gravity direction against the gyro-predicted tilt) into the
-        last ``fusion.sigma_memory_s`` seconds' list, Sigma's conjugate prior.  The window residuals are
+        last ``SIGMA_MEMORY_S`` seconds' list, Sigma's conjugate prior.  The window residuals are
         taken at the estimate, which an acceleration already pulled toward the specific force (they
         understate it); the innovations do not."""
         inn = cur.acc_dir - est.rtilt(*tilt_pred).T @ np.array([0.0, 0.0, 1.0])
-        mem = int(self.cfg.fusion.sigma_memory_s * 1e9)
+        mem = int(SIGMA_MEMORY_S * 1e9)
         self._innovations = [x for x in self._innovations if cur.t_ns - x[0] < mem] + [(cur.t_ns, inn)]
 
     # ------------------------------------------------------------------------------ the refinement
@@ -98,14 +109,14 @@ class TiltWindow:
         residual its visual weights can explain, from the 4-DOF pose ``(psi, t)`` of the levelling
         rotations ``L_k``, ``L_c``; returns ``(R_ck, t_ck)``.
 
-        CFO's chi-square gate (``pnp.chi2_gate``, as in ``pose6._chi2_refit``): ``r^T Sigma_bar^-1 r`` is
+        CFO's chi-square gate (``CHI2_GATE``, as in ``pose6._chi2_refit``): ``r^T Sigma_bar^-1 r`` is
         chi-square with 2 dof, and a match far beyond the gate is a wrong stereo depth, which the 2D-2D
         verification cannot see and the BCD's quadratic visual cost would follow [PROPOSAL].  Every match
         is tested at the BCD's pose and the BCD redone on those within the gate until the kept set stops
         changing, at most ``GATE_BCDS`` BCDs in all; where every match passes at the first pose it costs
         one test."""
-        gate = self.cfg.pnp.chi2_gate
-        s2q = sigma2 if self.cfg.pnp.current_noise else 0.0
+        gate = CHI2_GATE
+        s2q = sigma2
         keep = np.ones(len(m.p), dtype=bool)
         sub, cov_sub = m, cov
         for k in range(GATE_BCDS):
@@ -113,7 +124,7 @@ class TiltWindow:
             if gate <= 0 or k + 1 == GATE_BCDS:
                 break
             new = est.pnp6_whitened_sq(R, t, m.p, cov, m.q, s2q) <= gate
-            if np.array_equal(new, keep) or new.sum() < self.cfg.pnp.min_points:
+            if np.array_equal(new, keep) or new.sum() < MIN_PNP_POINTS:
                 break
             keep = new
             sub = m.subset(keep)
@@ -124,7 +135,7 @@ class TiltWindow:
         """One BCD (spec 8) from the 4-DOF pose ``(psi, t)`` of the levelling rotations ``L_k``, ``L_c``."""
         samples = self.samples + [cur]
         links = [s.dt for s in samples[1:]]  # seconds of gyro integration per chain link
-        cap = max(self.cfg.fusion.max_window_frames, 3)
+        cap = MAX_WINDOW_FRAMES
         if len(samples) > cap:
             # a long window (slow motion, a standstill: one keyframe for seconds) costs O(K^3) per LM
             # step; the oldest frames after the keyframe are folded into one chain link (the gyro
@@ -149,7 +160,7 @@ class TiltWindow:
             links = [merged.dt] + [s.dt for s in tail]
         depth = (m.p @ est.rot4(psi, L_k, L_c).T + t)[:, 2]
         front = depth > 0.5 * self.cfg.triangulation.min_depth_m
-        if front.sum() < self.cfg.pnp.min_points:
+        if front.sum() < MIN_PNP_POINTS:
             raise TrackingFailure(f"only {int(front.sum())} points in front of the camera after the 4-DOF step")
         m = m.subset(front)
         cov = cov[front]
@@ -163,21 +174,21 @@ class TiltWindow:
         # fixed-weight baseline, Sigma_imu = lambda_lo I at the accelerometer noise floor (sigma_a / g)^2
         lo = noise.acc_noise_density ** 2 / self.frame_period / GRAVITY ** 2
         if fc.adaptive:
-            lo += (self.cfg.init.ba_prior_sigma / GRAVITY) ** 2
+            lo += (BA_PRIOR_SIGMA / GRAVITY) ** 2
         tilts0 = np.array([self.kf_tilt] + [s.tilt for s in samples[1:-1]] + [tilt_pred])
-        # Sigma's conjugate prior: the innovations of the last sigma_memory_s (note_innovation)
+        # Sigma's conjugate prior: the innovations of the last SIGMA_MEMORY_S (note_innovation)
         prior, dof = None, 0.0
-        if int(fc.sigma_memory_s * 1e9) > 0:
+        if int(SIGMA_MEMORY_S * 1e9) > 0:
             E = np.array([x[1] for x in self._innovations])
             prior, dof = E.T @ E / len(E) + lo * np.eye(3), float(len(E))
         window = est.FusionWindow(p=m.p, cov=cov, q=m.q, sigma2=sigma2, R_ic=self.R_ic, acc_dir=acc,
                                   gyro_inc=rot, gyro_var=noise.gyro_noise_density ** 2 * np.array(links),
                                   prior_mean=self.kf_tilt,
-                                  prior_cov=self.kf_tilt_cov, psi0=psi, t0=t, lo=lo, hi=fc.sigma_hi ** 2,
+                                  prior_cov=self.kf_tilt_cov, psi0=psi, t0=t, lo=lo, hi=SIGMA_HI ** 2,
                                   tilts0=tilts0, sigma_prior=prior, sigma_prior_dof=dof)
         t0 = time.perf_counter()
         try:
-            state, Sigma, _ = est.bcd_refine(window, adaptive=fc.adaptive, max_iter=fc.max_iter, lm_iters=fc.lm_iters)
+            state, Sigma, _ = est.bcd_refine(window, adaptive=fc.adaptive, max_iter=BCD_MAX_ITER, lm_iters=BCD_LM_ITERS)
         except est.EstimatorError as err:
             raise TrackingFailure(f"BCD refinement: {err}") from None
         self.bcd_ms = (time.perf_counter() - t0) * 1e3

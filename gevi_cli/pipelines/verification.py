@@ -2,7 +2,7 @@
 
 CurrentFeature Odometry (spec 12.1, 5.5): (1) 5-point essential-matrix RANSAC (OpenCV) between
 keyframe-left and current-left, then (2) the l1-norm PnP on the survivors and the drop of the
-``l1_drop`` fraction with the largest reprojection errors.  GeVI replaces stage (1) with its 3-point
+``L1_DROP`` fraction with the largest reprojection errors.  GeVI replaces stage (1) with its 3-point
 RANSAC with known roll/pitch (and its defaults turn (2) off, spec 2); both expose
 ``__call__(z, q, p, rng) -> keep-mask`` (``rng``: the frame's ``numpy.random.Generator``, seeded per frame).
 """
@@ -13,7 +13,7 @@ import numpy as np
 
 from gevi_cli import estimators as est
 from gevi_cli.observations import RectifiedStereo
-from gevi_cli.pipelines.config import VerifyConfig
+from gevi_cli.pipelines.config import L1_DROP, MIN_PARALLAX_PX, RANSAC_PROB, THRESHOLD_SIGMAS, VerifyConfig
 
 
 class TrackingFailure(Exception):
@@ -26,10 +26,10 @@ def l1_stage(p: np.ndarray, q: np.ndarray, cfg: VerifyConfig) -> np.ndarray:
     the worst 10 %; its linear start can fail on a planar floor seen by few points (pool-hard_s2
     frame 449: "recover_pose: kappa <= 0", the one frame of that render CFO could not track), and
     the pose step after it has its own outlier test (the chi-square gate, method.md 5.4)."""
-    if cfg.l1 == "none" or cfg.l1_drop <= 0:
+    if cfg.l1 == "none" or L1_DROP <= 0:
         return np.ones(len(p), dtype=bool)
     try:
-        return est.pnp_l1_filter(p, q, drop=cfg.l1_drop, method=cfg.l1)
+        return est.pnp_l1_filter(p, q, drop=L1_DROP, method=cfg.l1)
     except est.EstimatorError:
         return np.ones(len(p), dtype=bool)
 
@@ -77,14 +77,14 @@ class FivePointL1Verification(TwoStageVerification):
         n = len(z)
         if cfg.ransac == "none" or n < 5:
             return np.ones(n, dtype=bool)
-        if self.parallax_px(z, q) < cfg.min_parallax_px:
+        if self.parallax_px(z, q) < MIN_PARALLAX_PX:
             # No translation to speak of: every E = [t]x R fits, so RANSAC cannot classify.
             return np.ones(n, dtype=bool)
         # (findEssentialMat's RANSAC draws from a generator of its own with a fixed seed, not from ``rng``: its
         # result does not change with cv2.setRNGSeed either, measured with OpenCV 5.1, so CFO's runs do not
         # depend on --seed)
         E, mask = cv2.findEssentialMat(z.reshape(-1, 1, 2), q.reshape(-1, 1, 2), np.eye(3), method=cv2.RANSAC,
-                                       prob=cfg.ransac_prob, threshold=cfg.ransac_threshold_px / self.camera.f)
+                                       prob=RANSAC_PROB, threshold=cfg.ransac_threshold_px / self.camera.f)
         if E is None or mask is None:
             raise TrackingFailure("5-point RANSAC found no essential matrix")
         return mask.ravel().astype(bool)
@@ -93,7 +93,7 @@ class FivePointL1Verification(TwoStageVerification):
 
 class ThreePointVerification(TwoStageVerification):
     """GeVI's verification (spec 7): upright 3-point RANSAC on keyframe-left / current-left with the
-    IMU roll/pitch of both frames, Sampson threshold max(``threshold_sigmas`` sigma, the px threshold);
+    IMU roll/pitch of both frames, Sampson threshold max(``THRESHOLD_SIGMAS`` sigma, the px threshold);
     then the optional l1 stage as in CFO (off in GeVI's defaults).
 
     ``levelling()`` returns ``(L_k, L_c, sigma)``: the levelling rotations of keyframe and current
@@ -112,13 +112,13 @@ class ThreePointVerification(TwoStageVerification):
         cfg, n = self.cfg, len(z)
         if n < 3:
             return np.ones(n, dtype=bool)
-        if self.parallax_px(z, q) < cfg.min_parallax_px:
+        if self.parallax_px(z, q) < MIN_PARALLAX_PX:
             return np.ones(n, dtype=bool)  # as for 5-point: no translation, the model cannot classify
         L_k, L_c, sigma = self.levelling()
-        thr = max(cfg.threshold_sigmas * sigma, cfg.ransac_threshold_px / self.camera.f)
+        thr = max(THRESHOLD_SIGMAS * sigma, cfg.ransac_threshold_px / self.camera.f)
         try:
             _, _, inliers, it = est.ransac_3pt_upright(z, q, L_k, L_c, thr, seed=rng,
-                                                       confidence=cfg.ransac_prob)
+                                                       confidence=RANSAC_PROB)
         except est.EstimatorError as err:
             raise TrackingFailure(f"3-point RANSAC: {err}") from None
         self.iterations = int(it)

@@ -22,7 +22,7 @@ import pytest
 from gevi_cli.camera import Intrinsics
 from gevi_cli.datasets import open_sequence
 from gevi_cli.datasets.calibration import StereoRig
-from gevi_cli.frontend.config import FrontendConfig
+from gevi_cli.frontend.config import BORDER_PX, DEROTATE_MIN_DEG, MIN_DISTANCE_PX, STEREO_ROW_MAX_PX, FrontendConfig
 from gevi_cli.frontend.derotate import apply_homography, fit_inplane
 from gevi_cli.frontend.grid import GridDetector, detect_grid
 from gevi_cli.frontend.image_frontend import STAGES, ImageFrontEnd
@@ -239,7 +239,7 @@ def test_rotation_prior_below_the_threshold_is_not_applied():
     a = texture(h, w)
     fe = ImageFrontEnd(_rectified_rig(h, w), CFG)
     fe.track(SimpleNamespace(left=a, right=a, t_ns=0))
-    tiny = exp_so3(np.radians([0.0, 0.5 * CFG.derotate_min_deg, 0.0]))
+    tiny = exp_so3(np.radians([0.0, 0.5 * DEROTATE_MIN_DEG, 0.0]))
     fe.track(SimpleNamespace(left=a, right=a, t_ns=1), tiny)
     assert fe.timings["derotate"] == 0.0 and fe.timings["lk"] > 0.0
 
@@ -301,11 +301,11 @@ def test_grid_one_corner_per_cell_none_in_occupied_cells():
     assert len(np.unique(cells, axis=0)) == len(uv)                       # <= 1 per cell
     occ_cells = {tuple(c) for c in np.floor(occupied / CFG.cell_px).astype(int)}
     assert not occ_cells & {tuple(c) for c in cells}                      # none in occupied cells
-    b = CFG.border_px
+    b = BORDER_PX
     assert (uv >= b).all() and (uv[:, 0] < 320 - b).all() and (uv[:, 1] < 240 - b).all()
     every = np.vstack([uv, occupied])
     d = np.linalg.norm(every[:, None] - every[None], axis=2) + np.eye(len(every)) * 1e9
-    assert d[: len(uv)].min() >= CFG.min_distance_px
+    assert d[: len(uv)].min() >= MIN_DISTANCE_PX
     np.testing.assert_array_equal(uv, GridDetector(CFG)(img, occupied))   # deterministic, same buffers or not
     mask = np.zeros_like(img)
     mask[:, 160:] = 1
@@ -460,7 +460,7 @@ def test_kitti_frame0_stereo_matches_and_road_height(kitti_run):
     assert len(st) > 300
     lo, hi = disparity_gate(cam, FINE)
     assert ((st.disparity >= lo) & (st.disparity <= hi)).all()
-    assert (np.abs(st.uv_left[:, 1] - st.uv_right[:, 1]) < FINE.stereo_row_max_px).all()
+    assert (np.abs(st.uv_left[:, 1] - st.uv_right[:, 1]) < STEREO_ROW_MAX_PX).all()
     assert st.disparity.max() > 60  # near points are matched too (the ladder), not only d < 40 px
     # Lower third of the image: road and the grass verges beside it.  The verges sit ~0.2 m above the
     # asphalt (corners on asphalt are few), so fit the ground plane robustly rather than take a median

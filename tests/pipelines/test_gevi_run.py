@@ -371,18 +371,20 @@ def test_start_of_motion_after_the_standstill_is_not_read_as_gravity(pool_render
     assert np.all(np.array(err) <= np.array(bound)), list(zip(err, bound))
 
 
-@pytest.mark.parametrize("setting", ["fusion.bias_window_s=-1", "fusion.bias_max_std=0"])
+@pytest.mark.parametrize("setting", ["fusion.bias_window_s=-1", "fusion.gravity_window_s=-1"])
 def test_bad_in_flight_bias_settings_are_one_line(pool_render, tmp_path, capsys, setting):
     code, _, err = run_cli(["run", pool_render, "--set", setting, "-o", tmp_path / "r"], capsys)
     assert code == 2 and setting.split("=")[0] in err and len(err.strip().splitlines()) == 1, err
 
 
-def test_in_flight_bias_is_adopted_and_recorded(pool_render, tmp_path, capsys):
+def test_in_flight_bias_is_adopted_and_recorded(pool_render, tmp_path, capsys, monkeypatch):
     """The plumbing of pipelines/acc_bias.py in a run: a 3 s window and a gate that takes any estimate
     (the 6 s render is too short for the default 20 s / 0.02 m/s^2 to adopt one).  The estimates move
     only the horizontal bias: the vertical part stays the standstill refinement's."""
-    code, _, err = run_cli(["run", pool_render, "--set", "fusion.bias_window_s=3", "--set", "fusion.bias_max_std=1",
-                            "-o", tmp_path / "r"], capsys)
+    import gevi_cli.pipelines.gevi as gevi_pipeline
+
+    monkeypatch.setattr(gevi_pipeline, "BIAS_MAX_STD", 1.0)
+    code, _, err = run_cli(["run", pool_render, "--set", "fusion.bias_window_s=3", "-o", tmp_path / "r"], capsys)
     assert code == 0, err
     st = _status(tmp_path / "r")
     flight = st["imu"]["acc_bias_in_flight"]
@@ -424,7 +426,10 @@ def test_chi_square_gate_keeps_wrong_stereo_depths_out_of_the_bcd(pool_render, t
 
     monkeypatch.setattr(KeyframeOdometry, "_match", corrupted)
     gated = ate(tmp_path / "gated")
-    open_gate = ate(tmp_path / "open", "--set", "pnp.chi2_gate=0")
+    import gevi_cli.pipelines.tilt_window as tilt_window
+
+    monkeypatch.setattr(tilt_window, "CHI2_GATE", 0.0)
+    open_gate = ate(tmp_path / "open")
     # measured (no BA, so the tracking is what is judged): clean 0.52 mm, gated 4.2 mm, open 7.2 mm; the
     # corrupted points the gate cannot flag (far ones, whose depth covariance covers a doubling) and
     # the 4-DOF start they drag keep the gated run above the clean one

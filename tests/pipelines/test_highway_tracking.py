@@ -39,16 +39,23 @@ def test_every_frame_tracked_by_vision(highway, tmp_path, capsys, method):
     assert status["evaluation"]["ate_m"] < 2.7
 
 
-def test_far_points_fill_the_keyframes(highway, tmp_path, capsys):
+def test_far_points_fill_the_keyframes(highway, tmp_path, capsys, monkeypatch):
     """CFO with stereo capped at 100 m and no filling: keyframes run out of points and frames are bridged."""
-    status = _status(highway, tmp_path, capsys, "cfo", "--set", "frontend.max_depth_m=100",
-                     "--set", "triangulation.fill_points=0")
+    import gevi_cli.frontend.stereo as stereo
+    import gevi_cli.pipelines.odometry as odometry
+
+    monkeypatch.setattr(stereo, "STEREO_MAX_DEPTH_M", 100.0)
+    monkeypatch.setattr(odometry, "FILL_POINTS", 0)
+    status = _status(highway, tmp_path, capsys, "cfo")
     assert status["frames_tracked"] < 200
 
 
-def test_gevi_reverifies_before_losing_a_frame(highway, tmp_path, capsys):
+def test_gevi_reverifies_before_losing_a_frame(highway, tmp_path, capsys, monkeypatch):
     """GeVI without the 3D-2D re-verification: outliers the 3-point verification cannot see (shifted
     along their epipolar lines; 30 % of frame 27's matches) drag the pose step past its limit, and the
     IMU carries frames."""
-    status = _status(highway, tmp_path, capsys, "gevi", "--set", "pnp.reverify=false")
+    import gevi_cli.pipelines.gevi as gevi_pipeline
+
+    monkeypatch.setattr(gevi_pipeline, "reverified", lambda *a, **k: None)
+    status = _status(highway, tmp_path, capsys, "gevi")
     assert _by_vision(status) < 200

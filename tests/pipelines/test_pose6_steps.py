@@ -6,7 +6,8 @@ import pytest
 
 from gevi_cli import estimators as est
 from gevi_cli.geometry import project
-from gevi_cli.pipelines.config import PnPConfig
+from gevi_cli.pipelines import pose6
+from gevi_cli.pipelines.config import CHI2_GATE, MAX_REFINE_STEPS, STEP_TOL, PnPConfig
 from gevi_cli.pipelines.pose6 import estimate_pose6
 from gevi_cli.studies import simulation as sim
 
@@ -55,14 +56,16 @@ def test_planar_floor_steps_until_converged(floor, monkeypatch):
     """Coplanar points make the linear model degenerate: one step from it stays thousands of
     variances away from the weighted optimum; the step rule goes on to the optimum."""
     p, cov, q, s2 = floor
-    one = replace(PnPConfig(), step_tol=0.0, fallback_sigmas=0.0)
-    R1, t1, _ = estimate_pose6(p, cov, q, one, s2, F_PX)
+    monkeypatch.setattr(pose6, "FALLBACK_SIGMAS", 0.0)  # no SQPnP fallback: the steps alone
+    monkeypatch.setattr(pose6, "STEP_TOL", 0.0)  # the paper's one step
+    R1, t1, _ = estimate_pose6(p, cov, q, PnPConfig(), s2, F_PX)
     assert _distance_to_optimum(R1, t1, p, cov, q, s2) > 1e3
+    monkeypatch.setattr(pose6, "STEP_TOL", STEP_TOL)
     calls = _count_steps(monkeypatch)
-    R, t, fell_back = estimate_pose6(p, cov, q, replace(PnPConfig(), fallback_sigmas=0.0), s2, F_PX)
+    R, t, fell_back = estimate_pose6(p, cov, q, PnPConfig(), s2, F_PX)
     monkeypatch.undo()
-    assert not fell_back and 2 <= len(calls) <= PnPConfig().max_refine_steps
-    assert calls[-1] <= PnPConfig().step_tol
+    assert not fell_back and 2 <= len(calls) <= MAX_REFINE_STEPS
+    assert calls[-1] <= STEP_TOL
     assert _distance_to_optimum(R, t, p, cov, q, s2) < 1e-2
 
 
@@ -77,11 +80,11 @@ def test_general_scene_one_step_is_within_the_noise(monkeypatch):
         calls = _count_steps(monkeypatch)
         estimate_pose6(p, cov, s.q, PnPConfig(), s2, sim.F_PX)
         monkeypatch.undo()
-        assert len(calls) <= 2 and calls[-1] <= PnPConfig().step_tol
+        assert len(calls) <= 2 and calls[-1] <= STEP_TOL
 
 
 @pytest.mark.parametrize("method", ["be-w", "epnp"])
-def test_reverify_removes_a_shifted_group_of_tracks(floor, method):
+def test_reverify_removes_a_shifted_group_of_tracks(floor, method, monkeypatch):
     """9 of 63 tracks shifted together by 38 px (pool-hard_s2, frames 239-241: invisible to the
     epipolar verification): every least-squares pose is dragged far off; the 3D-2D re-verification
     finds them and the pose comes back to within the noise."""
@@ -93,7 +96,10 @@ def test_reverify_removes_a_shifted_group_of_tracks(floor, method):
     q[:9] += np.array([38.0, 5.0]) / F_PX
     cfg = replace(PnPConfig(), method=method)
     # (the chi-square gate would also catch them for be-w: off here, this is the re-verification's test)
-    Rb, tb, _ = tracked_pose6(p, cov, q, replace(cfg, reverify=False, chi2_gate=0.0), s2, F_PX)
+    with monkeypatch.context() as off:
+        off.setattr(pose6, "reverified", lambda *a, **k: None)
+        off.setattr(pose6, "CHI2_GATE", 0.0)
+        Rb, tb, _ = tracked_pose6(p, cov, q, cfg, s2, F_PX)
     R, t, _ = tracked_pose6(p, cov, q, cfg, s2, F_PX)
     # distances from the optimum of the clean tracks, in squared standard deviations of the pose
     assert _distance_to_optimum(Rb, tb, p, cov, q_true, s2) > 1e3  # dragged by the group
@@ -117,7 +123,7 @@ def _wrong_depths(floor, frac, rng):
     return p2, cov2, bad
 
 
-def test_chi2_gate_removes_wrong_stereo_depths(floor):
+def test_chi2_gate_removes_wrong_stereo_depths(floor, monkeypatch):
     """15 % wrong depths drag the weighted pose hundreds of variances off the optimum of the clean
     matches; the chi-square gate on the weights' own covariance drops most of them (the far ones
     whose large covariance explains their error stay, with little weight) and takes away more than
@@ -128,24 +134,28 @@ def test_chi2_gate_removes_wrong_stereo_depths(floor):
     p, cov, bad = _wrong_depths(floor, 0.15, np.random.default_rng(2))
     good = np.setdiff1d(np.arange(len(p)), bad)
     cfg = PnPConfig()
-    R0, t0, _ = tracked_pose6(p, cov, q, replace(cfg, chi2_gate=0.0), s2, F_PX)
+    with monkeypatch.context() as off:
+        off.setattr(pose6, "CHI2_GATE", 0.0)
+        R0, t0, _ = tracked_pose6(p, cov, q, cfg, s2, F_PX)
     R, t, _ = tracked_pose6(p, cov, q, cfg, s2, F_PX)
     # distances from the optimum of the clean matches, in squared standard deviations of the pose
     d0 = _distance_to_optimum(R0, t0, p[good], cov[good], q[good], s2)
     d = _distance_to_optimum(R, t, p[good], cov[good], q[good], s2)
     assert d0 > 100.0 and d < 0.1 * d0, (d0, d)
-    assert np.sum(est.pnp6_whitened_sq(R, t, p, cov, q, s2)[bad] > cfg.chi2_gate) >= 0.75 * len(bad)
+    assert np.sum(est.pnp6_whitened_sq(R, t, p, cov, q, s2)[bad] > CHI2_GATE) >= 0.75 * len(bad)
 
 
-def test_chi2_gate_leaves_clean_matches_alone(floor):
+def test_chi2_gate_leaves_clean_matches_alone(floor, monkeypatch):
     """Without gross errors the gate drops about 0.1 % of the matches (its chi-square tail) and
     moves the pose by a small fraction of its standard deviation."""
     from gevi_cli.pipelines.pose6 import tracked_pose6
 
     p, cov, q, s2 = floor
     cfg = PnPConfig()
-    R0, t0, _ = tracked_pose6(p, cov, q, replace(cfg, chi2_gate=0.0), s2, F_PX)
+    with monkeypatch.context() as off:
+        off.setattr(pose6, "CHI2_GATE", 0.0)
+        R0, t0, _ = tracked_pose6(p, cov, q, cfg, s2, F_PX)
     m2 = est.pnp6_whitened_sq(R0, t0, p, cov, q, s2)
-    assert np.mean(m2 > cfg.chi2_gate) <= 0.01
+    assert np.mean(m2 > CHI2_GATE) <= 0.01
     R, t, _ = tracked_pose6(p, cov, q, cfg, s2, F_PX)
     assert _distance_to_optimum(R, t, p, cov, q, s2) < 0.25

@@ -10,10 +10,10 @@ def test_dump_config_lists_every_key_with_its_default(capsys):
     code, out, _ = run_cli(["run", "--dump-config"], capsys)
     assert code == 0
     keys = dict(line.split("=", 1)[0:2] for line in out.splitlines() if "=" in line and not line.startswith("#"))
-    for key in ("frontend.cell_px", "verify.ransac", "verify.l1_drop", "pnp.method", "keyframe.min_tracked",
+    for key in ("frontend.cell_px", "verify.ransac", "verify.l1", "pnp.method", "keyframe.min_tracked",
                 "ba.enabled", "run.seed", "triangulation.max_depth_m", "noise.method"):
         assert key in keys, key
-    assert keys["pnp.method"].split()[0] == "be-w" and keys["verify.l1_drop"].split()[0] == "0.1"
+    assert keys["pnp.method"].split()[0] == "be-w" and keys["verify.l1"].split()[0] == "irls"
 
 
 def test_set_and_shortcuts_override_in_order(capsys):
@@ -39,13 +39,13 @@ def test_bad_set_is_one_line(args, what, capsys):
 
 def test_bad_config_file_names_file_and_line(tmp_path, capsys):
     bad = tmp_path / "bad.yaml"
-    bad.write_text("pnp:\n  method: be-w\n  min_points: [1,\n")
+    bad.write_text("keyframe:\n  min_tracked_ratio: 0.5\n  min_tracked: [1,\n")
     code, _, err = run_cli(["run", "--dump-config", "--config", bad], capsys)
     assert code == 2 and err.count("\n") == 1 and f"{bad}:" in err and "not valid YAML" in err
     wrong = tmp_path / "wrong.yaml"
-    wrong.write_text("pnp:\n  min_points: 1.5\n")
+    wrong.write_text("keyframe:\n  min_tracked: 1.5\n")
     code, _, err = run_cli(["run", "--dump-config", "--config", wrong], capsys)
-    assert code == 2 and err == f"gevi: error: {wrong}: pnp.min_points=1.5: expected int in [4, inf)\n"
+    assert code == 2 and err == f"gevi: error: {wrong}: keyframe.min_tracked=1.5: expected int in [0, inf)\n"
 
 
 def test_not_a_sequence(tmp_path, capsys):
