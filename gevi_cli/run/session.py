@@ -280,15 +280,21 @@ def _imu_stream(source, kind: str, cfg, warn, start: int):
 
 
 def execute(req: RunRequest, echo=print) -> int:
-    """Run and evaluate; returns the exit status (0 complete, 3 tracking lost).  One BLAS/OpenCV thread
-    throughout (:func:`gevi_cli.run.threads.one_thread`)."""
+    """`gevi run`: :func:`run_in_folder`; returns the exit status (0 complete, 3 tracking lost)."""
+    return run_in_folder(req, echo).exit_code
+
+
+def run_in_folder(req: RunRequest, echo=print):
+    """Run and evaluate into a run folder, printing as `gevi run` does; returns the
+    :class:`~gevi_cli.run.pipeline.RunResult`.  One BLAS/OpenCV thread throughout
+    (:func:`gevi_cli.run.threads.one_thread`)."""
     from gevi_cli.run.threads import one_thread
 
     with one_thread():
         return _execute(req, echo)
 
 
-def _execute(req: RunRequest, echo) -> int:
+def _execute(req: RunRequest, echo):
     import yaml
 
     from gevi_cli import __version__
@@ -365,7 +371,7 @@ def _execute(req: RunRequest, echo) -> int:
     echo(f"wrote {run_dir} ({time.perf_counter() - t_start:.1f} s)")
     if st.state != "ok":
         echo(f"gevi run: {st.state}: {st.message}", err=True)
-    return result.exit_code
+    return result
 
 
 def _write_evaluation(run_dir: Path, req: RunRequest, cfg, result, seq_name: str, status, echo):
