@@ -7,47 +7,20 @@
     pair = evaluate(result.groundtruth, result.trajectory, align="se3")
 
 ``run`` resolves the configuration exactly as ``gevi run`` does (defaults -> the dataset kind's file
--> ``config`` -> ``sets``), drives the same odometry objects through the same driver, and keeps the
-output in memory; a run folder is one more sink (:class:`gevi_cli.run.sinks.FolderSink`), which is
-what ``gevi run`` adds.  Poses: 4x4, metres; stamps in ns.
+-> ``config`` -> ``sets``) and is :func:`gevi_cli.run.pipeline.run_and_evaluate`, the run path of
+``gevi run`` and ``gevi batch``: the same odometry objects, driver and evaluation (of the primary
+trajectory as written), with the output kept in memory; a run folder is one more sink
+(:class:`gevi_cli.run.sinks.FolderSink`), which is what ``gevi run`` adds.  Poses: 4x4, metres; stamps in ns.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from gevi_cli.evaluation.evaluate import EvalSettings, PairResult
+from gevi_cli.run.pipeline import RunResult, primary_file
 from gevi_cli.trajectory import Trajectory
 
 __all__ = ["RunResult", "run", "evaluate"]
-
-
-@dataclass
-class RunResult:
-    """One run in memory.
-
-    ``trajectory`` / ``trajectory_cam0``: the final (after-BA) poses of the body / rectified cam0 in the
-    odometry's world (CFO: the first frame; GeVI: gravity-aligned once initialised); ``online``: the
-    body poses as known when tracked.  ``frames``: one row per frame (status ok / bridged / inertial,
-    keyframe, matches, inliers, noise std in px, message); ``timings``: ms per stage and frame;
-    ``states``: GeVI's per-frame IMU state (None for CFO).  ``status``: what ``status.json`` holds.
-    ``evaluation``: against the sequence's ground truth (None without one), SE(3)-aligned as ``gevi run``.
-    """
-
-    method: str
-    sequence: str
-    config: object  # OdometryConfig
-    trajectory: Trajectory
-    trajectory_cam0: Trajectory
-    online: Trajectory
-    frames: object  # pandas.DataFrame
-    timings: object  # pandas.DataFrame
-    states: object | None  # pandas.DataFrame
-    status: object  # RunStatus
-    groundtruth: Trajectory | None
-    evaluation: PairResult | None
 
 
 def run(sequence, method: str | None = None, config: str | None = None, sets=(), stride: int = 1, start: int = 0,
@@ -66,34 +39,17 @@ def run(sequence, method: str | None = None, config: str | None = None, sets=(),
 
 
 def _run(sequence, method, config, sets, stride, start, max_frames, seed, groundtruth, sinks, progress) -> RunResult:
-    import pandas as pd
-
-    from gevi_cli.run.driver import run_odometry
     from gevi_cli.run.folder import RunStatus
-    from gevi_cli.run.session import RunRequest, make_pipeline, resolve
-    from gevi_cli.run.sinks import FRAME_COLUMNS, STAGES, MemorySink
+    from gevi_cli.run.pipeline import run_and_evaluate
+    from gevi_cli.run.session import RunRequest, resolve
 
     req = RunRequest(sequence=str(sequence), method=method, start=start, max_frames=max_frames, stride=stride,
                      config_file=None if config is None else str(config), sets=tuple(sets), seed=seed, quiet=True,
                      groundtruth=None if groundtruth is None else str(groundtruth))
     resolved = resolve(req)
-    source, method, cfg, start, stop = resolved.source, resolved.req.method, resolved.cfg, resolved.start, resolved.stop
-    frontend, odometry = make_pipeline(resolved, warn=lambda msg: None)
-    memory = MemorySink()
-    status = RunStatus(method=method, stride=stride, sequence=source.name)
-    run_odometry(source, odometry, status, [memory, *sinks], T_B_C0=np.asarray(frontend.camera.T_B_C0), start=start,
-                 stop=stop, progress=progress, warn=lambda msg: None)
-    frames = pd.DataFrame(memory.frame_rows, columns=list(FRAME_COLUMNS))
-    timings = pd.DataFrame(memory.timing_rows, columns=["index", "t_ns", "total"] + list(STAGES))
-    states = pd.DataFrame(memory.state_rows) if memory.state_rows else None
-    online = memory.online_trajectory()
-    est = memory.trajectory("body")
-    gt = source.groundtruth
-    pair = None
-    if gt is not None and len(est):
-        pair = evaluate(gt, est, align=cfg.run.align, delta=cfg.run.rpe_delta, method=method, sequence=source.name)
-    return RunResult(method, source.name, cfg, est, memory.trajectory("cam0"), online, frames, timings, states,
-                     status, gt, pair)
+    status = RunStatus(method=resolved.req.method, stride=stride, sequence=resolved.source.name,
+                       primary=primary_file(resolved))
+    return run_and_evaluate(resolved, status, sinks, progress=progress)
 
 
 def evaluate(reference, estimate, align: str = "se3", delta: float = 1.0, unit: str = "frames",

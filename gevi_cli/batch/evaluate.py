@@ -4,6 +4,10 @@ Every comparison across methods is SE(3) in the body frame with RPE over consecu
 stereo-inertial methods (GeVI and its ablations) are also aligned in posyaw (4-DOF: gravity is
 known), in tables of their own.  A crashed run is a ``failed`` cell with its message; a (sequence,
 method) never run has no result at all and reads ``n/a``.  Units: metres, degrees, seconds.
+
+Each run is evaluated once: the batch takes the evaluation its run path made
+(:func:`gevi_cli.run.pipeline.run_and_evaluate`) and only trims the ground truth to the run's frames
+for the coverage figure and gate; a run without one (finished by an earlier invocation) is evaluated here.
 """
 from __future__ import annotations
 
@@ -81,8 +85,34 @@ def _T(spec_T, T_seq):
     return load_T_B_C0(Path(spec_T))
 
 
-def evaluate_batch(specs, baselines, settings, inertial_methods: set, online: bool = False) -> BatchResults:
-    """Evaluate every finished run of ``specs`` and every baseline (see module docstring)."""
+def _same_evaluation(run_settings, settings) -> bool:
+    """Whether a run's own evaluation is the batch's but for the alignment's name and the coverage gate."""
+    return dataclasses.replace(run_settings, align=settings.align, min_coverage=settings.min_coverage) == settings
+
+
+def _taken(ev, gt, settings, spec, trial: str, primary: Path):
+    """The batch's result from a run's own evaluation ``ev`` (:class:`gevi_cli.run.pipeline.Evaluation`):
+    labelled with the batch's method, sequence and trial, its coverage read against ``gt`` (the ground
+    truth over the run's frames: the same matched pairs, so ATE, RPE, scale and KITTI figures are
+    unchanged) and the batch's coverage gate applied."""
+    from gevi_cli.evaluation.evaluate import failed, gate_coverage
+
+    if ev.error is not None:
+        return failed(spec.method, spec.sequence, trial, primary, ev.error)
+    r = dataclasses.replace(ev.result, method=spec.method, sequence=spec.sequence, trial=trial)
+    if r.association is not None and not r.association.by_index:
+        r.association = r.association.over(gt)
+    return gate_coverage(r, settings.min_coverage)
+
+
+def evaluate_batch(specs, baselines, settings, inertial_methods: set, online: bool = False,
+                   evaluated: dict | None = None) -> BatchResults:
+    """Evaluate every finished run of ``specs`` and every baseline (see module docstring).
+
+    ``evaluated``: the runs' own evaluations by run id (:class:`gevi_cli.batch.worker.Finished`), taken
+    where their settings are the batch's (:func:`_taken`); a run finished by an earlier invocation
+    (resumed batch) or evaluated otherwise (another ``rpe_delta``, ``max_diff``, alignment) is evaluated
+    here from its folder."""
     from gevi_cli.evaluation.evaluate import evaluate_pair, failed
     from gevi_cli.evaluation.inputs import run_primary
     from gevi_cli.run.folder import read_status
@@ -110,6 +140,8 @@ def evaluate_batch(specs, baselines, settings, inertial_methods: set, online: bo
         out.runs.append(run)
         primary = run_primary(Path(spec.run_dir)) if marker["state"] != "crashed" else None
         aligns = ["se3"] + (["posyaw"] if spec.method in inertial_methods else [])
+        own = {ev.align: ev for ev in (evaluated or {}).get(spec.run_id, [])
+               if _same_evaluation(ev.settings, settings)}
         for align in aligns:
             bucket = out.se3 if align == "se3" else out.posyaw
             if primary is None:
@@ -119,9 +151,12 @@ def evaluate_batch(specs, baselines, settings, inertial_methods: set, online: bo
             try:
                 gt, T, raw = load(gt_path)
                 gt = _clip_to_run(gt, Path(spec.run_dir), settings.max_diff_s)
-                est = read_trajectory(primary, name=spec.method)
-                r = evaluate_pair(gt, est, settings, align, method=spec.method, sequence=spec.sequence, trial=trial,
-                                  T_B_C0=T, gt_raw=raw)
+                if align in own:
+                    r = _taken(own[align], gt, settings, spec, trial, primary)
+                else:
+                    est = read_trajectory(primary, name=spec.method)
+                    r = evaluate_pair(gt, est, settings, align, method=spec.method, sequence=spec.sequence,
+                                      trial=trial, T_B_C0=T, gt_raw=raw)
             except GeviError as exc:
                 r = failed(spec.method, spec.sequence, trial, primary, exc.one_line())
             r.lost = marker["state"] == "lost-tracking"

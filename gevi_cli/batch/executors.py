@@ -1,5 +1,5 @@
 """Where runs execute: this process (``--jobs 1``), local spawned processes (``--jobs N``) or a
-dask.distributed cluster (``--executor dask --scheduler ADDRESS``).  All yield (spec, marker) as runs
+dask.distributed cluster (``--executor dask --scheduler ADDRESS``).  All yield (spec, :class:`~gevi_cli.batch.worker.Finished`) as runs
 finish; the results tree is the same whichever is used (each run writes only its own folder).
 """
 from __future__ import annotations

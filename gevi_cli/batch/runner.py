@@ -81,11 +81,11 @@ def run_batch(config_path, out=None, *, jobs: int = 1, force: bool = False, exec
         echo(f"gevi batch: {len(specs) - len(todo)} of {len(specs)} runs already finished (--force redoes them)")
     echo(f"gevi batch: {len(todo)} run(s) to do on {executor}" + (f" x{jobs}" if executor == "local" else "")
          + f" -> {out}")
-    _dispatch(todo, executor, jobs, scheduler, echo, tty, execute_all)
+    evaluated = _dispatch(todo, executor, jobs, scheduler, echo, tty, execute_all)
     settings = EvalSettings(align="se3", n_align=-1, max_diff_s=cfg.eval.max_diff_s, rpe_delta=cfg.eval.rpe_delta,
                             rpe_unit="frames", min_coverage=cfg.eval.min_coverage, est_frame="same", kitti=True)
     res = evaluate_batch(specs, baselines, settings, {m.name for m in cfg.methods if m.method == "gevi"},
-                         online=cfg.eval.online)
+                         online=cfg.eval.online, evaluated=evaluated)
     report = write_batch_report(out / "report", cfg, specs, baselines, res, settings, skipped=skipped,
                                 elapsed_s=time.perf_counter() - t0, executor=executor)
     bad = [r for r in res.runs if r["state"] != "ok"]
@@ -95,16 +95,20 @@ def run_batch(config_path, out=None, *, jobs: int = 1, force: bool = False, exec
     return 3 if bad else 0
 
 
-def _dispatch(todo, executor, jobs, scheduler, echo, tty, execute_all) -> None:
-    """Run ``todo``, showing runs done / failed / left and the time left (tqdm's estimate)."""
+def _dispatch(todo, executor, jobs, scheduler, echo, tty, execute_all) -> dict:
+    """Run ``todo``, showing runs done / failed / left and the time left (tqdm's estimate); returns each
+    run's own evaluations by run id."""
     from tqdm import tqdm
 
+    evaluated = {}
     if not todo:
-        return
+        return evaluated
     n_bad, t0 = 0, time.perf_counter()
     bar = tqdm(total=len(todo), unit="run", disable=not tty, dynamic_ncols=True, desc="gevi batch")
     try:
-        for k, (spec, marker) in enumerate(execute_all(todo, executor, jobs, scheduler), 1):
+        for k, (spec, done) in enumerate(execute_all(todo, executor, jobs, scheduler), 1):
+            marker = done.marker
+            evaluated[spec.run_id] = done.evaluations
             n_bad += marker["state"] != "ok"
             bar.update(1)
             bar.set_postfix_str(f"done {k - n_bad}, failed {n_bad}, left {len(todo) - k}")
@@ -118,3 +122,4 @@ def _dispatch(todo, executor, jobs, scheduler, echo, tty, execute_all) -> None:
                 echo(f"{line}; {len(todo) - k} left, about {left:.0f} s")
     finally:
         bar.close()
+    return evaluated

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 MARKER = "done.json"
@@ -39,29 +40,40 @@ def _clear(run_dir: Path) -> None:
     run_dir.mkdir(parents=True)
 
 
-def run_one(spec) -> dict:
-    """Run ``spec`` (a :class:`~gevi_cli.batch.plan.RunSpec`) into its folder; return its marker.
+@dataclass
+class Finished:
+    """A batch run done: its marker (``done.json``) and the run's own evaluations
+    (:class:`gevi_cli.run.pipeline.Evaluation`; empty when it crashed or had no ground truth), which the
+    batch's evaluation takes instead of evaluating the run a second time."""
+
+    marker: dict
+    evaluations: list = field(default_factory=list)
+
+
+def run_one(spec) -> Finished:
+    """Run ``spec`` (a :class:`~gevi_cli.batch.plan.RunSpec`) into its folder, as `gevi run` does.
 
     Any exception becomes state ``crashed`` with its message; KeyboardInterrupt is not caught (the
-    folder then has no marker and the run is redone on resume).  ``execute`` runs with one BLAS/OpenCV
+    folder then has no marker and the run is redone on resume).  The run has one BLAS/OpenCV
     thread (:func:`gevi_cli.run.threads.one_thread`), in whatever process this is.
     """
     from gevi_cli import __version__
     from gevi_cli.errors import GeviError
     from gevi_cli.run.folder import RunStatus, read_status, write_status
-    from gevi_cli.run.session import execute
+    from gevi_cli.run.session import run_in_folder
 
     run_dir = Path(spec.run_dir)
     _clear(run_dir)
     t0 = time.perf_counter()
-    code, message = 0, ""
+    code, message, evaluations = 0, "", []
     with open(run_dir / "run.log", "w", buffering=1) as log:
 
         def echo(msg="", err=False, **_):
             log.write(("[stderr] " if err else "") + str(msg) + "\n")
 
         try:
-            code = execute(spec.request(), echo=echo)
+            result = run_in_folder(spec.request(), echo=echo)
+            code, evaluations = result.exit_code, result.evaluations
         except GeviError as exc:
             code, message = 2, exc.one_line()
         except Exception as exc:  # noqa: BLE001 - a crash is recorded and the batch goes on
@@ -82,4 +94,4 @@ def run_one(spec) -> dict:
            "exit_code": code, "seed": spec.seed, "wall_s": round(time.perf_counter() - t0, 3),
            "gevi_version": __version__, "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
     _write_marker(run_dir, doc)
-    return doc
+    return Finished(doc, evaluations)

@@ -10,6 +10,7 @@ The result carries the counts and the coverage used by the failed rule:
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -39,6 +40,12 @@ class Association:
     n_gt: int
     coverage: float
     by_index: bool
+
+    def over(self, gt: Trajectory) -> Association:
+        """The same matched pairs counted against ``gt``, a part of the ground truth that holds every matched
+        pose (a ground truth trimmed to the frames a run was given): its pose count, indices and coverage."""
+        return dataclasses.replace(self, gt_index=np.searchsorted(gt.t_ns, self.gt.t_ns), n_gt=len(gt),
+                                   coverage=_coverage(gt.t_ns, self.gt.t_ns))
 
     @property
     def n_matched(self) -> int:
@@ -90,8 +97,12 @@ def associate(gt: Trajectory, est: Trajectory, max_diff_s: float = 0.01, t_offse
         raise DataError(where, f"no pose matches the ground truth{tol}{off}: estimate spans "
                                f"{_span_text(est.t_ns, est.indexed)}, ground truth spans "
                                f"{_span_text(gt.t_ns, gt.indexed)}; check the stamp units or pass --t-offset")
-    span = float(gt.t_ns[-1] - gt.t_ns[0])
-    matched_span = float(gt.t_ns[g_idx[-1]] - gt.t_ns[g_idx[0]])
-    coverage = matched_span / span if span > 0 else 1.0
     return Association(gt=gt.select(g_idx), est=est.select(e_idx), gt_index=g_idx, est_index=e_idx,
-                       n_est=len(est), n_gt=len(gt), coverage=coverage, by_index=by_index)
+                       n_est=len(est), n_gt=len(gt), coverage=_coverage(gt.t_ns, gt.t_ns[g_idx]), by_index=by_index)
+
+
+def _coverage(gt_t_ns: np.ndarray, matched_t_ns: np.ndarray) -> float:
+    """The matched fraction of the ground truth's time span (1 for a ground truth of one instant)."""
+    span = float(gt_t_ns[-1] - gt_t_ns[0])
+    matched_span = float(matched_t_ns[-1] - matched_t_ns[0])
+    return matched_span / span if span > 0 else 1.0

@@ -206,10 +206,15 @@ def evaluate_pair(gt: Trajectory, est: Trajectory, settings: EvalSettings, align
     w = frame_mixup_warning(assoc, aligned, res.rpe)
     if w:
         res.warnings.append(f"{where}: {w}")
-    if assoc.coverage < settings.min_coverage:
+    return gate_coverage(res, settings.min_coverage)
+
+
+def gate_coverage(res: PairResult, min_coverage: float) -> PairResult:
+    """``res``, failed when it matches less than ``min_coverage`` of the ground truth's time span."""
+    if res.ok and res.association is not None and res.association.coverage < min_coverage:
         res.status = "failed"
-        res.reason = (f"coverage {100 * assoc.coverage:.1f} % of the GT time span < "
-                      f"{100 * settings.min_coverage:g} % (--min-coverage)")
+        res.reason = (f"coverage {100 * res.association.coverage:.1f} % of the GT time span < "
+                      f"{100 * min_coverage:g} % (--min-coverage)")
     return res
 
 

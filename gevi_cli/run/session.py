@@ -1,6 +1,6 @@
-"""One `gevi run`: resolve the configuration, open the input, build front end + odometry, drive the
-run into its folder, evaluate it with the library call of `gevi eval` (``evaluation.pair``), and print
-the result.
+"""One `gevi run`: resolve the configuration, open the input, build front end + odometry, then the one
+run path (:func:`gevi_cli.run.pipeline.run_and_evaluate`, also :func:`gevi_cli.api.run`) with the run
+folder as its sink; on top of it, the printing, the plots, the eval folders and the roll/pitch error.
 
 Configuration precedence (later wins): dataclass defaults -> ``gevi_cli/configs/<kind>.yaml`` -> ``--config``
 -> ``--set`` -> the shortcut options (``--pnp``, ``--no-ba``, ``--seed``).
@@ -279,30 +279,27 @@ def _imu_stream(source, kind: str, cfg, warn, start: int):
     return stream
 
 
-def _gt_source(req: RunRequest, source):
-    """What `gevi eval --gt` should read for this run (a file or the dataset folder), or None."""
-    if req.groundtruth:
-        return req.groundtruth
-    if source.groundtruth is not None:
-        return req.sequence
-    return None
-
-
 def execute(req: RunRequest, echo=print) -> int:
-    """Run and evaluate; returns the exit status (0 complete, 3 tracking lost).  One BLAS/OpenCV thread
-    throughout (:func:`gevi_cli.run.threads.one_thread`)."""
+    """`gevi run`: :func:`run_in_folder`; returns the exit status (0 complete, 3 tracking lost)."""
+    return run_in_folder(req, echo).exit_code
+
+
+def run_in_folder(req: RunRequest, echo=print):
+    """Run and evaluate into a run folder, printing as `gevi run` does; returns the
+    :class:`~gevi_cli.run.pipeline.RunResult`.  One BLAS/OpenCV thread throughout
+    (:func:`gevi_cli.run.threads.one_thread`)."""
     from gevi_cli.run.threads import one_thread
 
     with one_thread():
         return _execute(req, echo)
 
 
-def _execute(req: RunRequest, echo) -> int:
+def _execute(req: RunRequest, echo):
     import yaml
 
     from gevi_cli import __version__
-    from gevi_cli.run.driver import run_odometry
-    from gevi_cli.run.folder import PRIMARY, PRIMARY_KITTI, RunStatus, make_run_dir
+    from gevi_cli.run.folder import RunStatus, make_run_dir
+    from gevi_cli.run.pipeline import primary_file, run_and_evaluate
     from gevi_cli.run.sinks import FolderSink
 
     t_start = time.perf_counter()
@@ -325,7 +322,7 @@ def _execute(req: RunRequest, echo) -> int:
     frontend, odometry = make_pipeline(resolved, warn)
     # read (and check) the ground truth before the run folder exists: a KITTI --gt whose rows do not match
     # the sequence's times.txt is refused in one line without leaving an empty run behind
-    gt_traj = source.groundtruth
+    primary = primary_file(resolved)
     seq_name = source.name
     run_dir = make_run_dir(req.out, Path(req.results_root), req.method, seq_name)
     sensor = "stereo-inertial" if method == "gevi" else "stereo"
@@ -334,18 +331,17 @@ def _execute(req: RunRequest, echo) -> int:
                   **dataclasses.asdict(cfg)}
     (run_dir / "config.yaml").write_text(yaml.safe_dump(config_doc, sort_keys=False))
     kitti_rows = kind in ("kitti", "ov2slam-tracks")
-    # KITTI ground truth without stamps is matched by frame index: then the KITTI rows are primary
-    indexed_gt = kitti_rows and gt_traj is not None and gt_traj.indexed
-    status = RunStatus(method=req.method, stride=req.stride, primary=PRIMARY_KITTI if indexed_gt else PRIMARY, sequence=seq_name, gevi_version=__version__,
+    status = RunStatus(method=req.method, stride=req.stride, primary=primary, sequence=seq_name,
+                       gevi_version=__version__,
                        command=" ".join(["gevi"] + sys.argv[1:]), started=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
     strided = f" at stride {req.stride} (original frames {req.start * req.stride}..{(stop - 1) * req.stride})" \
         if req.stride > 1 else ""
     echo(f"gevi run: {req.method} on {seq_name} ({kind}), frames {req.start}..{stop - 1}{strided} -> {run_dir}")
 
     folder = FolderSink(run_dir, kitti_rows, odometry.state_columns, odometry.state_file)
-    outcome = run_odometry(source, odometry, status, [folder], T_B_C0=np.asarray(frontend.camera.T_B_C0),
-                           start=req.start, stop=stop, progress=not req.quiet and sys.stderr.isatty(), warn=warn)
-    st = outcome.status
+    result = run_and_evaluate(resolved, status, [folder], pipeline=(frontend, odometry), run_dir=run_dir,
+                              progress=not req.quiet and sys.stderr.isatty(), warn=warn)
+    st = result.status
     fps = st.frames_done / st.elapsed_s if st.elapsed_s > 0 else float("nan")
     echo(f"{st.frames_tracked}/{st.frames_done} frames tracked, {st.keyframes} keyframes, "
          f"{st.elapsed_s:.2f} s ({fps:.1f} frames/s)")
@@ -363,10 +359,9 @@ def _execute(req: RunRequest, echo) -> int:
         from gevi_cli.evaluation.plots import plot_imu_states
 
         plot_imu_states(run_dir / "imu_states.csv", run_dir / "imu_states.png")
-    gt = _gt_source(req, source)
     pair = None
-    if gt is not None:
-        pair = _evaluate(run_dir, req, cfg, gt, seq_name, st, echo)
+    if result.evaluations:
+        pair = _write_evaluation(run_dir, req, cfg, result, seq_name, st, echo)
     else:
         echo("no ground truth: not evaluated (give --gt FILE)")
     from gevi_cli.run.folder import write_status, write_trajectory_png
@@ -376,38 +371,29 @@ def _execute(req: RunRequest, echo) -> int:
     echo(f"wrote {run_dir} ({time.perf_counter() - t_start:.1f} s)")
     if st.state != "ok":
         echo(f"gevi run: {st.state}: {st.message}", err=True)
-    return outcome.exit_code
+    return result
 
 
-def _evaluate(run_dir: Path, req: RunRequest, cfg, gt, seq_name: str, status, echo):
-    """The run's primary trajectory against the ground truth ``gt`` (a file or the dataset folder) into
-    RUN/eval, with the library call of `gevi eval` (:mod:`gevi_cli.evaluation.pair`).
-
-    The config's alignment (SE(3): what every comparison across methods uses) is primary; a
-    stereo-inertial run adds posyaw (4-DOF, gravity known) beside it in RUN/eval/posyaw.
-    Returns the primary alignment's PairResult (None when the evaluation failed).
-    """
-    from gevi_cli.evaluation.pair import read_groundtruth
-
-    aligns = [cfg.run.align] + (["posyaw"] if req.method == "gevi" and cfg.run.align != "posyaw" else [])
-    try:
-        truth, problem = read_groundtruth(gt), None
-    except GeviError as err:  # the run is complete on disk; an unusable ground truth must not hide it
-        truth, problem = None, err.one_line()
+def _write_evaluation(run_dir: Path, req: RunRequest, cfg, result, seq_name: str, status, echo):
+    """The run's evaluations (:func:`gevi_cli.run.pipeline.run_and_evaluate`) into RUN/eval (the primary
+    alignment) and RUN/eval/<align> (posyaw beside SE(3) for a stereo-inertial run), the status.json
+    entries and the printed lines; then the roll/pitch error of a stereo-inertial run.
+    Returns the primary alignment's PairResult (None when the evaluation failed)."""
     status.evaluation = {}
-    for k, align in enumerate(aligns):
-        out = run_dir / "eval" if k == 0 else run_dir / "eval" / align
-        if truth is None:
-            ev, result = _failed(problem, echo)
+    primary = None
+    for k, ev in enumerate(result.evaluations):
+        out = run_dir / "eval" if k == 0 else run_dir / "eval" / ev.align
+        if ev.error is not None:
+            entry, pair = _failed(ev.error, echo)
         else:
-            ev, result = _evaluate_one(run_dir, req, cfg, truth, seq_name, status, align, out, echo)
+            entry, pair = _write_one(run_dir, req, cfg, result.truth, seq_name, status, ev, out, echo)
         if k == 0:
-            status.evaluation.update(ev)
-            primary = result
+            status.evaluation.update(entry)
+            primary = pair
         else:
-            status.evaluation[align] = ev
+            status.evaluation[ev.align] = entry
     if req.method == "gevi":
-        _evaluate_tilt(run_dir, truth, status, echo, problem)
+        _evaluate_tilt(run_dir, result.truth, status, echo, result.truth_problem)
     return primary
 
 
@@ -448,20 +434,16 @@ def _failed(why: str, echo):
     return {"failed": why}, None
 
 
-def _evaluate_one(run_dir: Path, req: RunRequest, cfg, truth, seq_name: str, status, align: str, out: Path, echo):
-    """(the status.json evaluation entries, the PairResult or None when it failed) of the run's primary
-    trajectory against ``truth`` (a GroundTruth) aligned by ``align``, with its eval folder ``out``."""
-    from gevi_cli.evaluation.evaluate import EvalSettings
-    from gevi_cli.evaluation.pair import evaluate_file
+def _write_one(run_dir: Path, req: RunRequest, cfg, truth, seq_name: str, status, ev, out: Path, echo):
+    """(the status.json evaluation entries, the PairResult or None when it failed) of one alignment's
+    evaluation ``ev`` of the run's primary trajectory against ``truth``, with its eval folder ``out``."""
     from gevi_cli.evaluation.report import build_tables
     from gevi_cli.evaluation.runner import eval_inputs, write_eval_folder
 
-    est = run_dir / status.primary
+    r, settings = ev.result, ev.settings
     try:
-        settings = EvalSettings(align=align, rpe_delta=cfg.run.rpe_delta, min_coverage=0.0).checked()
-        r = evaluate_file(truth, est, settings, align, method=req.method, sequence=seq_name, keep_going=True)
         tables = build_tables([r], [req.method], [seq_name], settings)
-        inputs = eval_inputs({seq_name: truth.path}, {f"{req.method}/{seq_name}": est})
+        inputs = eval_inputs({seq_name: truth.path}, {f"{req.method}/{seq_name}": run_dir / status.primary})
         write_eval_folder(out, tables, [r], {seq_name: truth}, settings, inputs, req.plots)
     except GeviError as err:  # the run is complete on disk; an unusable evaluation must not hide it
         return _failed(err.one_line(), echo)
