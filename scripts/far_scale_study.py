@@ -2,13 +2,16 @@
 
     python scripts/far_scale_study.py SEQ_DIR [--stride K] [--plot OUT.png]
 
-Runs CurrentFeature Odometry on a KITTI sequence folder with ground truth and keeps, per keyframe, its
+Runs CurrentFeature Odometry (disparity-offset self-calibration off) on a KITTI sequence folder with
+ground truth and keeps, per keyframe, its
 triangulated points and, per frame, the matches the pose step used.  Prints (1) each keyframe point's
 stereo depth against its depth triangulated over the later frames' tracks from the ground-truth poses
 (rays least squares, parallax > 0.5 deg), per disparity bin; (2) the median ratio of the keyframe ->
 frame translation to the ground truth's for the pose step as run, for the unweighted Bias-Eli step
-(`be`), and for the steps with the far points (beyond 40 baselines) by bearing only (both the linear
-and the weighted steps: the rule is no longer in the pipeline), per disparity band of the points used.  Frames: keyframe-left camera, metres; ground truth: the sequence's cam0 poses.
+(`be`), and for the rule the study measured and the pipeline no longer has: the Bias-Eli step with the
+stereo covariances, then the weighted steps with the far points (beyond 40 baselines) by bearing only,
+per disparity band of the points used.  Frames: keyframe-left camera, metres; ground truth: the
+sequence's cam0 poses.
 """
 from __future__ import annotations
 
@@ -18,7 +21,7 @@ import numpy as np
 
 from gevi_cli import estimators as est
 from gevi_cli.geometry import invert_pose
-from gevi_cli.pipelines.pose6 import tracked_pose6
+from gevi_cli.pipelines.pose6 import _weighted_steps, tracked_pose6
 from gevi_cli.run.session import RunRequest, make_pipeline, resolve
 
 BINS = [0, 5, 10, 20, 40, 80, 1000]
@@ -84,7 +87,8 @@ def main() -> int:
     ap.add_argument("--stride", type=int, default=1)
     ap.add_argument("--plot", help="write the depth-ratio plot here (PNG)")
     a = ap.parse_args()
-    kfs, steps, obs, T_gt, cam, cfg = capture(a.sequence, a.stride)
+    # the data as the pair gives it: without the disparity-offset self-calibration the study led to
+    kfs, steps, obs, T_gt, cam, cfg = capture(a.sequence, a.stride, ["triangulation.self_calibrate=false"])
     fb = cam.fx * cam.baseline
     pairs = []
     for k, (ids, z, p) in sorted(kfs.items()):
@@ -111,9 +115,9 @@ def main() -> int:
             p, cov, q, y, z = s["p"][m], s["cov"][m], s["q"][m], s["y"][m], s["z"][m]
             try:
                 _, t_w, _ = tracked_pose6(p, cov, q, cfg.pnp, s["sigma2"], cam.f)
-                _, t_b = est.pnp6_be(p, cov, q)
+                R_b, t_b = est.pnp6_be(p, cov, q)
                 far = (z[:, 0] - y[:, 0]) < 1 / 40.0
-                _, t_f, _ = tracked_pose6(p, est.bearing_only(p, cov, far), q, cfg.pnp, s["sigma2"], cam.f)
+                _, t_f = _weighted_steps(R_b, t_b, p, est.bearing_only(p, cov, far), q, cfg.pnp, s["sigma2"])
             except Exception:  # a band too small or degenerate for a pose: left out
                 continue
             rows.append([np.linalg.norm(t_w) / tg, np.linalg.norm(t_b) / tg, np.linalg.norm(t_f) / tg])
