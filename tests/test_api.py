@@ -70,6 +70,9 @@ class _ThreadProbe:
     def status(self, status):
         pass
 
+    def restart(self):
+        self.cv2, self.blas = [], []
+
     def close(self, status):
         pass
 

@@ -11,8 +11,11 @@ stereo disparities lie on the line ``d = k / Z_mono - delta``.  The intercept is
 Each tracked step gives one robust line fit (Huber IRLS); a step counts when its intercept is well
 determined: its points reach far enough that zero disparity is not an extrapolation
 (:data:`MAX_EXTRAPOLATION`) and the intercept's standard error is below :data:`MAX_STEP_SE_PX`.  The estimate is the median of the counted steps
-once there are :data:`MIN_STEPS` of them and it reaches :data:`MIN_OFFSET_PX`, else 0.  Frames: keyframe-left normalized coordinates,
-disparities in pixels of the rectified images.
+once there are :data:`MIN_STEPS` of them and it reaches :data:`MIN_OFFSET_PX`, else 0.  The keyframes made
+before the estimate existed carry the offset; the run driver therefore restarts the run once, from its first
+frame, when the estimate first becomes known (:attr:`DisparityOffset.calls_for_restart`), carrying the steps
+seen so far (:meth:`DisparityOffset.carried`).  Frames: keyframe-left normalized coordinates, disparities in
+pixels of the rectified images.
 """
 from __future__ import annotations
 
@@ -91,13 +94,19 @@ def step_offset(inv_depth: np.ndarray, disparity_px: np.ndarray) -> tuple[float,
 
 @dataclass
 class DisparityOffset:
-    """The running estimate; :attr:`value` (px) is what the next keyframe's disparities are raised by."""
+    """The running estimate; :attr:`value` (px) is what the next keyframe's disparities are raised by.
+    ``observed_through``: the frames up to this index were observed by an earlier pass of the run (their
+    steps are in ``steps``) and are not observed again; -1 in a run's first pass."""
 
     steps: list[float] = field(default_factory=list)
+    observed_through: int = -1
 
-    def observe(self, z: np.ndarray, q: np.ndarray, raw_disparity_px: np.ndarray, T_ck: np.ndarray) -> None:
-        """One tracked step: keyframe-left ``z`` and current-left ``q`` (normalized), the keyframe's raw
-        (uncorrected) stereo disparities of those points (px) and the tracked pose ``T_ck``."""
+    def observe(self, index: int, z: np.ndarray, q: np.ndarray, raw_disparity_px: np.ndarray,
+                T_ck: np.ndarray) -> None:
+        """One tracked step of frame ``index``: keyframe-left ``z`` and current-left ``q`` (normalized), the
+        keyframe's raw (uncorrected) stereo disparities of those points (px) and the tracked pose ``T_ck``."""
+        if index <= self.observed_through:
+            return
         t = T_ck[:3, 3]
         if not np.linalg.norm(t) > 0:
             return
@@ -120,3 +129,13 @@ class DisparityOffset:
             return 0.0
         delta = float(np.median(self.steps))
         return delta if abs(delta) >= MIN_OFFSET_PX else 0.0
+
+    @property
+    def calls_for_restart(self) -> bool:
+        """The offset has just become known in the run's first pass, so every keyframe so far was made
+        without it: the run is better restarted from its first frame with it."""
+        return self.observed_through < 0 and self.value != 0.0
+
+    def carried(self, through: int) -> DisparityOffset:
+        """The estimate for a restarted run: the steps seen so far, frames up to ``through`` observed."""
+        return DisparityOffset(steps=list(self.steps), observed_through=through)

@@ -353,7 +353,7 @@ class KeyframeOdometry:
         timings["pose"] = time.perf_counter() - t2
         if self.disparity_offset is not None:
             raw = (m.z[:, 0] - m.y[:, 0]) * self.camera.fx - self.kf.disparity_offset_px
-            self.disparity_offset.observe(m.z, m.q, raw, T_ck)
+            self.disparity_offset.observe(self.index, m.z, m.q, raw, T_ck)
         disp_px = float(np.mean(np.linalg.norm(m.q - m.z, axis=1))) * self.camera.f
         self._last = (m.p, m.q)
         return T_ck, n_match, len(m.ids), disp_px

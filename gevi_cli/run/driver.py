@@ -4,10 +4,16 @@ The odometry objects hold state only; this module owns the reading, the clocks a
 and hands each pose the odometry releases (its PoseEvents, :mod:`gevi_cli.pipelines.types`) to the
 sinks (:mod:`gevi_cli.run.sinks`) the moment it is released, so an interrupted or crashed run leaves
 every pose it computed in its folder, and ``status.json`` says how it ended.
+
+When the odometry's stereo self-calibration first finds the pair's disparity offset
+(:mod:`gevi_cli.pipelines.disparity_offset`), every keyframe so far was made without it: the driver
+restarts the run once from its first frame with a fresh odometry (``rebuild``) carrying the estimate, and
+the sinks start over (``restart``), so the run's output is made with one calibration throughout.
 """
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,9 +57,10 @@ def _frames(source, start: int, stop: int):
 
 
 def run_odometry(source, odometry: Odometry, status: RunStatus, sinks, *, T_B_C0: np.ndarray, start: int, stop: int,
-                 progress: bool = True, warn=print) -> RunOutcome:
+                 progress: bool = True, warn=print, rebuild: Callable[[], Odometry] | None = None) -> RunOutcome:
     """Track frames ``start:stop`` of ``source``, handing every pose and frame to each of ``sinks``
-    (:mod:`gevi_cli.run.sinks`) the moment it is made."""
+    (:mod:`gevi_cli.run.sinks`) the moment it is made.  ``rebuild``: a fresh odometry like ``odometry``,
+    for the restart with the disparity offset found on the way (None: no restart)."""
     from tqdm import tqdm
 
     stamps: dict[int, int] = {}
@@ -83,11 +90,32 @@ def run_odometry(source, odometry: Odometry, status: RunStatus, sinks, *, T_B_C0
                                           "frames": n, "reason": reason})
             lost_open = None
 
+    def restart_calibrated(through: int):
+        """A fresh odometry carrying the disparity offset found at frame ``through``, and the run begun again."""
+        nonlocal odometry, frames, lost_open
+        found = odometry.disparity_offset
+        warn(f"stereo disparity offset {found.value:.2f} px found after {status.frames_done + 1} frames: restarting "
+             "from the first frame with the corrected pair")
+        frames.close()
+        odometry = rebuild()
+        odometry.disparity_offset = found.carried(through=through)
+        status.restarted_after_frames = status.frames_done + 1
+        status.frames_done = status.frames_tracked = status.keyframes = 0
+        for name in ("lost_intervals", "bridged_frames", "inertial_frames", "skipped_frames"):
+            getattr(status, name).clear()
+        stamps.clear()
+        lost_open = None
+        bar.reset()
+        for sink in sinks:
+            sink.restart()
+            sink.status(status)
+        frames = _frames(source, start, stop)
+
     bar = tqdm(total=stop - start, unit="frame", disable=not progress, dynamic_ncols=True, leave=False)
     for sink in sinks:
         sink.status(status)
+    frames = _frames(source, start, stop)
     try:
-        frames = _frames(source, start, stop)
         while True:
             t_read = time.perf_counter()
             item = next(frames, None)
@@ -102,6 +130,10 @@ def run_odometry(source, odometry: Odometry, status: RunStatus, sinks, *, T_B_C0
                 continue
             t0 = time.perf_counter()
             res = odometry.track(frame)
+            offset = odometry.disparity_offset
+            if rebuild is not None and offset is not None and offset.calls_for_restart:
+                restart_calibrated(res.index)
+                continue
             res.timings["read"] = t_read
             total = time.perf_counter() - t0 + t_read
             stamps[res.index] = res.t_ns

@@ -78,6 +78,8 @@ class RunStatus:
     # the stereo pair's disparity offset as self-calibrated (px; 0: none corrected) and the steps it rests on
     disparity_offset_px: float = 0.0
     disparity_offset_steps: int = 0
+    # frames the run had tracked when it first found the offset and restarted from its first frame with it (0: none)
+    restarted_after_frames: int = 0
     lost_intervals: list = field(default_factory=list)  # {"start_s", "end_s", "frames", "first_index", "reason"}
     bridged_frames: list = field(default_factory=list)  # frame indices bridged at constant velocity
     inertial_frames: list = field(default_factory=list)  # GeVI: not tracked visually, carried by the IMU alone

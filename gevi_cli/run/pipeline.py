@@ -109,7 +109,8 @@ def run_and_evaluate(resolved, status: RunStatus, sinks=(), *, pipeline=None, ru
     source, method = resolved.source, resolved.req.method
     memory = MemorySink()
     outcome = run_odometry(source, odometry, status, [memory, *sinks], T_B_C0=np.asarray(frontend.camera.T_B_C0),
-                           start=resolved.start, stop=resolved.stop, progress=progress, warn=warn)
+                           start=resolved.start, stop=resolved.stop, progress=progress, warn=warn,
+                           rebuild=lambda: make_pipeline(resolved, warn=lambda msg: None)[1])
     frames = pd.DataFrame(memory.frame_rows, columns=list(FRAME_COLUMNS))
     timings = pd.DataFrame(memory.timing_rows, columns=["index", "t_ns", "total"] + list(STAGES))
     states = pd.DataFrame(memory.state_rows) if memory.state_rows else None

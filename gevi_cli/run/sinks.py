@@ -3,7 +3,8 @@
 The driver (:mod:`gevi_cli.run.driver`) hands every sink the same events, in order: a final pose
 (``final``: rectified cam0 and body pose of a frame whose pose will not change any more), an online
 pose (``online``: body pose as known when tracked), a frame's outcome (``frame``), the status now and
-then (``status``), and ``close`` once.  Stamps in ns; poses 4x4, world frame of the odometry.
+then (``status``), and ``close`` once.  ``restart``: the run begins again from its first frame (the driver's
+restart with a self-calibrated stereo pair); what was handed on so far is superseded.  Stamps in ns; poses 4x4, world frame of the odometry.
 """
 from __future__ import annotations
 
@@ -33,6 +34,8 @@ class RunSink(Protocol):
 
     def status(self, status: RunStatus) -> None: ...
 
+    def restart(self) -> None: ...
+
     def close(self, status: RunStatus) -> None: ...
 
 
@@ -49,6 +52,13 @@ class FolderSink:
 
     def __init__(self, run_dir: Path, kitti_rows: bool, state_columns=None, state_file: str = "states.csv"):
         self.run_dir = Path(run_dir)
+        self._kitti_rows, self._state_file = kitti_rows, state_file
+        self._state_cols = list(state_columns) if state_columns else None
+        self._open()
+
+    def _open(self):
+        """(Re)create the streamed files, each with its header only."""
+        kitti_rows, state_file = self._kitti_rows, self._state_file
         self._online = PoseStream(self.run_dir / "traj_online_body.tum", "tum", "body")
         self._finals = [PoseStream(self.run_dir / "traj_body.tum", "tum", "body"),
                         PoseStream(self.run_dir / "traj_cam0.tum", "tum", "cam0")]
@@ -59,7 +69,6 @@ class FolderSink:
         self._timing.write("index,t_ns,total_ms," + ",".join(f"{s}_ms" for s in STAGES) + "\n")
         self._frames = open(self.run_dir / "frames.csv", "w", buffering=1)
         self._frames.write(",".join(FRAME_COLUMNS) + "\n")
-        self._state_cols = list(state_columns) if state_columns else None
         self._states = None
         if self._state_cols:
             self._states = open(self.run_dir / state_file, "w", buffering=1)
@@ -85,12 +94,19 @@ class FolderSink:
     def status(self, status):
         write_status(self.run_dir, status)
 
-    def close(self, status):
+    def restart(self):
+        self._close_files()
+        self._open()
+
+    def _close_files(self):
         for stream in [self._online] + self._finals:
             stream.close()
         for fh in (self._timing, self._frames, self._states):
             if fh is not None:
                 fh.close()
+
+    def close(self, status):
+        self._close_files()
         write_status(self.run_dir, status)
 
 
@@ -98,6 +114,9 @@ class MemorySink:
     """The same output kept in memory (:func:`gevi_cli.api.run`)."""
 
     def __init__(self):
+        self.restart()
+
+    def restart(self):
         self.final_rows: list[tuple[int, np.ndarray, np.ndarray]] = []
         self.online_rows: list[tuple[int, np.ndarray]] = []
         self.frame_rows: list[tuple] = []

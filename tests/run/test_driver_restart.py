@@ -1,0 +1,82 @@
+"""The run driver restarts a run once, from its first frame, when the stereo self-calibration first finds
+the pair's disparity offset (gevi_cli.run.driver): what the first pass handed on is superseded, every frame
+reaches the sinks (folder and memory) exactly once, and the restarted odometry carries the estimate."""
+import json
+
+import numpy as np
+
+from gevi_cli.pipelines.disparity_offset import DisparityOffset
+from gevi_cli.pipelines.types import FINAL, ONLINE, FrameResult, pose_events
+from gevi_cli.run.driver import run_odometry
+from gevi_cli.run.folder import RunStatus
+from gevi_cli.run.sinks import FolderSink, MemorySink
+
+
+class _Frames:
+    """A source of ``n`` frames stamped 0.1 s apart (only their stamps matter here)."""
+
+    def __init__(self, n):
+        self.n = n
+
+    def frames(self, start, stop):
+        for i in range(start, stop):
+            yield type("F", (), {"index": i, "t_ns": i * 100_000_000})()
+
+
+class _StubOdometry:
+    """Moves 1 m per frame along x; its disparity offset becomes known (0.8 px) at frame ``found_at``."""
+
+    state_columns, state_file, fallbacks = (), "states.csv", 0
+
+    def __init__(self, found_at):
+        self.found_at, self.index = found_at, -1
+        self.disparity_offset = DisparityOffset()
+        self.carried_value = None  # the offset the odometry had when it tracked its first frame
+
+    def track(self, frame):
+        self.index += 1
+        if self.index == 0:
+            self.carried_value = self.disparity_offset.value
+        if self.index == self.found_at:
+            self.disparity_offset.steps.extend([0.8] * 5)
+        T = np.eye(4)
+        T[0, 3] = float(self.index)
+        res = FrameResult(self.index, int(frame.t_ns), T)
+        res.poses = pose_events(ONLINE, [(self.index, T)], "w") + pose_events(FINAL, [(self.index, T)], "w")
+        return res
+
+    def close(self, closing_ba=False):
+        return []
+
+    def summary(self):
+        return {}
+
+
+def test_the_run_restarts_once_with_the_offset_and_every_frame_is_handed_on_once(tmp_path):
+    built = []
+
+    def rebuild():
+        built.append(_StubOdometry(found_at=3))  # would find it again at frame 3: the carried estimate must win
+        return built[-1]
+
+    memory, folder, status = MemorySink(), FolderSink(tmp_path, kitti_rows=False), RunStatus()
+    out = run_odometry(_Frames(10), _StubOdometry(found_at=3), status, [memory, folder], T_B_C0=np.eye(4),
+                       start=0, stop=10, progress=False, warn=lambda msg: None, rebuild=rebuild)
+    assert out.exit_code == 0 and len(built) == 1
+    restarted = built[0]
+    assert restarted.carried_value == 0.8 and restarted.disparity_offset.observed_through == 3
+    assert status.restarted_after_frames == 4 and status.frames_done == 10 == status.frames_tracked
+    assert [r[0] for r in memory.frame_rows] == list(range(10))
+    assert [r[0] for r in memory.final_rows] == [i * 100_000_000 for i in range(10)]
+    rows = (tmp_path / "traj_body.tum").read_text().splitlines()
+    assert len([r for r in rows if not r.startswith("#")]) == 10
+    assert len((tmp_path / "frames.csv").read_text().splitlines()) == 11  # header + 10 frames
+    saved = json.loads((tmp_path / "status.json").read_text())
+    assert saved["restarted_after_frames"] == 4 and saved["disparity_offset_px"] == 0.8
+
+
+def test_no_rebuild_means_no_restart():
+    memory, status = MemorySink(), RunStatus()
+    run_odometry(_Frames(6), _StubOdometry(found_at=2), status, [memory], T_B_C0=np.eye(4), start=0, stop=6,
+                 progress=False, warn=lambda msg: None)
+    assert status.restarted_after_frames == 0 and [r[0] for r in memory.frame_rows] == list(range(6))
