@@ -40,6 +40,7 @@ from gevi_cli.inertial.standstill import (
     GRAVITY,
     StandstillEstimate,
     imu_at_rest,
+    standstill_bias_track,
     standstill_estimate,
     tilt_from_specific_force,
 )
@@ -182,7 +183,8 @@ def imu_report(stream: ImuStream, gt=None, cfg: VelocityAidedConfig = VelocityAi
         tilt_spread, bias_spread = _start_spread(stream, still[0][1])
         cfg = replace(cfg, tilt_sigma0=max(cfg.tilt_sigma0, tilt_spread), bias_sigma0=max(cfg.bias_sigma0, bias_spread))
     rep.attitude = VelocityAidedFilter(R0, b_g, noise, stream.dt_nominal, cfg).run(t, g, _in_g(a, start))
-    rep.attitude_offline = compensated_vqf_attitude(g, a, stream.dt_nominal, b_g, offline=True)
+    rep.attitude_offline = compensated_vqf_attitude(g, a, stream.dt_nominal, compensation(stream, still, b_g, causal=False),
+                                                    offline=True)
     if gt is not None:
         if align:
             rep.alignment = estimate_alignment(t, g - b_g, gt)
@@ -195,6 +197,14 @@ def imu_report(stream: ImuStream, gt=None, cfg: VelocityAidedConfig = VelocityAi
             rep.reference_note += f"; scored over {len(scored_t_ns)} samples (the dataset's movement phases)"
         rep.comparison = _compare(rep, stream, TiltReference(ref, scored_t_ns), R0, b_g, cfg)
     return rep
+
+
+def compensation(stream: ImuStream, still: list, b_g, causal: bool) -> np.ndarray:
+    """The gyro bias (n, 3) rad/s the standstill-compensated VQF rows subtract: ``b_g`` (the starting
+    standstill's) re-measured at every later standstill whose specific force stayed still
+    (:func:`~gevi_cli.inertial.standstill.standstill_bias_track`), causal or offline."""
+    w = max(int(round(STILL_WINDOW_S / stream.dt_nominal)), 4)
+    return standstill_bias_track(stream.t_ns, stream.gyro, stream.acc, still, b_g, w, causal)
 
 
 def _start_spread(stream: ImuStream, i1: int) -> tuple[float, float]:
@@ -334,9 +344,12 @@ def _compare(rep: ImuReport, stream: ImuStream, ref: TiltReference, R0, b_g, cfg
                                 (True, f"VQF 6D offline (vqf {v}), offline", "vqf.offlineVQF, default parameters")):
         rows.append((name, tilt_stats(t, vqf_attitude(g, a, stream.dt_nominal, offline), forward_hold=False),
                      note + f"; sample period {stream.dt_nominal * 1e3:.4g} ms"))
-    comp = "VQF 6D on the gyro minus the standstill bias, biasSigmaInit 0.1, biasSigmaMotion 0.02 deg/s, biasForgettingTime 1000 s"
+    comp = ("VQF 6D on the gyro minus the standstill bias (re-measured at each standstill whose specific force stayed "
+            "still{}), biasSigmaInit 0.1, biasSigmaMotion 0.02 deg/s, biasForgettingTime 1000 s")
+    still = _standstills(stream)
     rows.append(("standstill-compensated VQF online (gevi imu), causal",
-                 tilt_stats(t, compensated_vqf_attitude(g, a, stream.dt_nominal, b_g), forward_hold=False), comp))
+                 tilt_stats(t, compensated_vqf_attitude(g, a, stream.dt_nominal, compensation(stream, still, b_g, causal=True)),
+                            forward_hold=False), comp.format(": the latest")))
     rows.append(("standstill-compensated VQF offline (gevi imu attitude_offline.tum), offline",
-                 tilt_stats(t, rep.attitude_offline, forward_hold=False), comp))
+                 tilt_stats(t, rep.attitude_offline, forward_hold=False), comp.format(": linear between them")))
     return rows

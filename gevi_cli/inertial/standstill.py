@@ -126,3 +126,79 @@ class WindowMoments:
         am = (self._a1[i1] - self._a1[i0]) / n
         av = (self._a2[i1] - self._a2[i0]) / n - am * am
         return np.sqrt(np.maximum(gv, 0.0)), float(np.sqrt(max(av, 0.0))), self.a_ref + am
+
+
+def _unit(v):
+    return v / np.linalg.norm(v)
+
+
+def _standstill_bias(t_ns, gyro, acc, i0: int, j: int, window: int, b_prev):
+    """The gyro bias that samples ``i0 .. j-1`` (a standstill of the loose IMU test, after the first) say, or
+    None when they do not say it.
+
+    The loose test passes slow rotation as well as rest (a constant rate has no spread), so the mean rate
+    is the bias only if the specific force did not turn with it: the rate's part perpendicular to the
+    mean specific force (the part that would tilt the body), over the time between the first and the last
+    window, predicts a turn ``phi_gyr`` of the specific-force direction; the accelerometer shows
+    ``phi_acc`` between those windows.  Rest predicts ``phi_acc`` ~ 0, rotation ``phi_acc`` ~ ``phi_gyr``:
+    the nearer hypothesis wins (``phi_acc < phi_gyr / 2``).  Only that perpendicular part is taken (the
+    part along gravity, a rate about the vertical, is not checked by the accelerometer): returns
+    ``b_prev`` + it.  At least two windows.
+    """
+    if j - i0 < 2 * window:
+        return None
+    u0, u1 = _unit(acc[i0:i0 + window].mean(0)), _unit(acc[j - window:j].mean(0))
+    up = _unit(acc[i0:j].mean(0))
+    w = gyro[i0:j].mean(0) - b_prev
+    perp = w - up * (up @ w)
+    span_s = (int(t_ns[j - 1 - window // 2]) - int(t_ns[i0 + window // 2])) * 1e-9
+    phi_acc = float(np.arccos(np.clip(u0 @ u1, -1.0, 1.0)))
+    phi_gyr = float(np.linalg.norm(perp)) * span_s
+    if phi_gyr > 0.0 and phi_acc >= 0.5 * phi_gyr:
+        return None
+    return b_prev + perp
+
+
+def standstill_bias_track(t_ns, gyro, acc, standstills, b0, window: int, causal: bool) -> np.ndarray:
+    """Gyro bias (n, 3) rad/s per sample from the standstills of the stream (index ranges ``[i0, i1)`` of
+    the loose IMU test, ``window`` samples per test window), starting from ``b0`` (the starting
+    standstill's mean rate, or zeros).
+
+    A gyro bias shifts during a flight (the flight in ``../shared/data/mav_vicon_imu`` lands with 2.4 deg/s
+    on one axis, 0.02 deg/s at take-off); every later standstill whose specific force did not turn
+    (:func:`_standstill_bias`) measures it again.  ``causal``: the latest such measurement, taken over the
+    standstill's windows seen so far and applied from the end of the last of them; offline
+    (``causal=False``): linear in time between the standstills' centres (each standstill's whole
+    measurement; the starting standstill's is ``b0``), constant before the first and after the last.  No
+    standstill after the start whose specific force stayed still: ``b0`` throughout.
+    """
+    t = np.asarray(t_ns, dtype=np.int64)
+    g = np.asarray(gyro, dtype=float)
+    a = np.asarray(acc, dtype=float)
+    n = len(t)
+    b = np.asarray(b0, dtype=float).copy()
+    out = np.tile(b, (n, 1))
+    later = [(i0, i1) for i0, i1 in standstills if i0 > 0]
+    if causal:
+        for i0, i1 in later:
+            base = b
+            for j in range(i0 + 2 * window, i1 + 1, window):
+                new = _standstill_bias(t, g, a, i0, j, window, base)
+                if new is not None:
+                    b = new
+                    out[j - 1:] = b
+        return out
+    first = [(i0, i1) for i0, i1 in standstills if i0 == 0]
+    centres = [0.5 * (t[0] + t[first[0][1] - 1])] if first else []
+    biases = [b] if first else []
+    for i0, i1 in later:
+        new = _standstill_bias(t, g, a, i0, i1, window, b)
+        if new is not None:
+            b = new
+            centres.append(0.5 * (t[i0] + t[i1 - 1]))
+            biases.append(b)
+    if not biases:
+        return out
+    c = np.asarray(centres, dtype=float)
+    B = np.asarray(biases)
+    return np.stack([np.interp(t.astype(float), c, B[:, i]) for i in range(3)], axis=1)

@@ -13,8 +13,9 @@ z up (heading arbitrary: 6D).
 bias estimate at ``biasClip`` (2 deg/s = 0.035 rad/s), and EuRoC's ADIS16448 has a 0.078 rad/s yaw-axis
 bias; VQF's rest detection (2 deg/s gyro threshold) never fires on a multirotor whose rotors idle.  The
 rate fed to VQF is therefore the gyro minus the bias measured over the starting standstill (rad/s, IMU
-frame), so VQF only estimates what is left, which lies inside its clip, with the parameters
-:data:`COMPENSATED_PARAMS` (chosen on `scripts/imu_regimes.py`'s rows and euroc_micro; see
+frame), re-measured at every later standstill whose specific force stayed still (a bias shifts in flight:
+:func:`gevi_cli.inertial.standstill.standstill_bias_track`, per sample), so VQF only estimates what is
+left, which lies inside its clip, with the parameters :data:`COMPENSATED_PARAMS` (chosen on `scripts/imu_regimes.py`'s rows and euroc_micro; see
 docs/studies/imu_attitude.md).  No ground truth enters it.
 """
 from __future__ import annotations
@@ -53,8 +54,8 @@ COMPENSATED_PARAMS = {"biasSigmaInit": 0.1, "biasSigmaMotion": 0.02, "biasForget
 
 def compensated_vqf_attitude(gyro: np.ndarray, acc: np.ndarray, dt_s: float, gyro_bias: np.ndarray,
                              offline: bool = False) -> np.ndarray:
-    """R_WI per sample (n, 3, 3) from VQF 6D on ``gyro - gyro_bias`` (rad/s; the starting standstill's mean
-    rate) with :data:`COMPENSATED_PARAMS`: online (causal) or ``offline``."""
+    """R_WI per sample (n, 3, 3) from VQF 6D on ``gyro - gyro_bias`` (rad/s; (3,) or one per sample (n, 3):
+    the standstills' mean rates) with :data:`COMPENSATED_PARAMS`: online (causal) or ``offline``."""
     g = np.asarray(gyro, dtype=np.float64) - np.asarray(gyro_bias, dtype=np.float64)
     return vqf_attitude(g, acc, dt_s, offline, COMPENSATED_PARAMS)
 
