@@ -22,7 +22,8 @@ import numpy as np
 from gevi_cli import estimators as est
 from gevi_cli.geometry import invert_pose
 from gevi_cli.pipelines.pose6 import _weighted_steps, tracked_pose6
-from gevi_cli.run.session import RunRequest, make_pipeline, resolve
+from gevi_cli.run.assemble import make_pipeline
+from gevi_cli.run.session import RunRequest, resolve
 
 BINS = [0, 5, 10, 20, 40, 80, 1000]
 

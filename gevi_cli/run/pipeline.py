@@ -100,8 +100,8 @@ def run_and_evaluate(resolved, status: RunStatus, sinks=(), *, pipeline=None, ru
     "crashed"); an unusable ground truth or evaluation is recorded in the result instead."""
     import pandas as pd
 
+    from gevi_cli.run.assemble import build, make_pipeline
     from gevi_cli.run.driver import run_odometry
-    from gevi_cli.run.session import make_pipeline
     from gevi_cli.run.sinks import FRAME_COLUMNS, STAGES, MemorySink
 
     warn = warn if warn is not None else (lambda msg: None)
@@ -110,7 +110,8 @@ def run_and_evaluate(resolved, status: RunStatus, sinks=(), *, pipeline=None, ru
     memory = MemorySink()
     outcome = run_odometry(source, odometry, status, [memory, *sinks], T_B_C0=np.asarray(frontend.camera.T_B_C0),
                            start=resolved.start, stop=resolved.stop, progress=progress, warn=warn,
-                           rebuild=lambda: make_pipeline(resolved, warn=lambda msg: None)[1])
+                           rebuild=lambda: build(source, resolved.kind, resolved.cfg, method, warn=lambda msg: None,
+                                                  start=resolved.start)[1])
     frames = pd.DataFrame(memory.frame_rows, columns=list(FRAME_COLUMNS))
     timings = pd.DataFrame(memory.timing_rows, columns=["index", "t_ns", "total"] + list(STAGES))
     states = pd.DataFrame(memory.state_rows) if memory.state_rows else None

@@ -14,7 +14,8 @@ def _track(sequence, method: str, n: int, closing_ba: bool):
     """(events of every track(), events of close(), keyframe indices, the odometry) over the first ``n``
     frames.  The render moves fast at 10 Hz (every frame would be a keyframe by image displacement): a
     looser keyframe rule gives the keyframe windows of several frames the tests are about."""
-    from gevi_cli.run.session import RunRequest, make_pipeline, resolve
+    from gevi_cli.run.assemble import make_pipeline
+    from gevi_cli.run.session import RunRequest, resolve
 
     r = resolve(RunRequest(sequence=str(sequence), method=method, max_frames=n, quiet=True,
                            sets=("keyframe.max_mean_disp_px=30", "keyframe.min_tracked_ratio=0.5", "keyframe.min_tracked=10")))
