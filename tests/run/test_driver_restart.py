@@ -80,3 +80,36 @@ def test_no_rebuild_means_no_restart():
     run_odometry(_Frames(6), _StubOdometry(found_at=2), status, [memory], T_B_C0=np.eye(4), start=0, stop=6,
                  progress=False, warn=lambda msg: None)
     assert status.restarted_after_frames == 0 and [r[0] for r in memory.frame_rows] == list(range(6))
+
+
+def test_a_gevi_run_restarts_with_its_imu_and_writes_each_frame_once(pool_render, tmp_path, monkeypatch, capsys):
+    """GeVI rebuilt for the restart reads its IMU again from the start: an offset made to appear at frame 20
+    (the pool render's points are near, so its own estimate never counts a step) restarts the run, and the run
+    folder holds one row per frame in every file, the IMU states included, all tracked."""
+    import pandas as pd
+
+    from gevi_cli.pipelines import disparity_offset as mod
+    from support import run_cli
+
+    real = mod.DisparityOffset.observe
+
+    def observe(self, index, *args):
+        real(self, index, *args)
+        if index == 20 and self.observed_through < 0:
+            self.steps.extend([0.3] * mod.MIN_STEPS)
+
+    monkeypatch.setattr(mod.DisparityOffset, "observe", observe)
+    out = tmp_path / "run"
+    code, _, err = run_cli(["run", pool_render, "--method", "gevi", "-o", out], capsys)
+    assert code == 0, err
+    assert "restarting from the first frame" in err
+    status = json.loads((out / "status.json").read_text())
+    n = status["frames_total"]
+    assert status["restarted_after_frames"] == 21 and status["disparity_offset_px"] == 0.3
+    assert status["state"] == "ok" and status["frames_done"] == status["frames_tracked"] == n
+    frames = pd.read_csv(out / "frames.csv")
+    assert list(frames["index"]) == list(range(n))
+    assert len(pd.read_csv(out / "imu_states.csv")) == n
+    for name in ("traj_body.tum", "traj_online_body.tum"):
+        rows = [r for r in (out / name).read_text().splitlines() if r and not r.startswith("#")]
+        assert len(rows) == n
