@@ -195,7 +195,7 @@ def imu_report(stream: ImuStream, gt=None, cfg: VelocityAidedConfig = VelocityAi
         ref = rep.alignment.apply(gt) if rep.alignment is not None else gt
         if scored_t_ns is not None:
             rep.reference_note += f"; scored over {len(scored_t_ns)} samples (the dataset's movement phases)"
-        rep.comparison = _compare(rep, stream, TiltReference(ref, scored_t_ns), R0, b_g, cfg)
+        rep.comparison = _compare(rep, stream, TiltReference(ref, scored_t_ns), R0, b_g, cfg, still)
     return rep
 
 
@@ -309,8 +309,9 @@ def held_back(t_out, t_samples) -> np.ndarray:
     return np.where(i > 0, t_samples[np.maximum(i - 1, 0)], -1)
 
 
-def _compare(rep: ImuReport, stream: ImuStream, ref: TiltReference, R0, b_g, cfg: VelocityAidedConfig) -> list:
-    from gevi_cli.inertial.vqf_rows import vqf_attitude, vqf_version
+def _compare(rep: ImuReport, stream: ImuStream, ref: TiltReference, R0, b_g, cfg: VelocityAidedConfig,
+             still: list) -> list:
+    from gevi_cli.inertial.vqf_rows import COMPENSATED_PARAMS, vqf_attitude, vqf_version
 
     t, g, a = stream.t_ns, stream.gyro, stream.acc
 
@@ -344,9 +345,9 @@ def _compare(rep: ImuReport, stream: ImuStream, ref: TiltReference, R0, b_g, cfg
                                 (True, f"VQF 6D offline (vqf {v}), offline", "vqf.offlineVQF, default parameters")):
         rows.append((name, tilt_stats(t, vqf_attitude(g, a, stream.dt_nominal, offline), forward_hold=False),
                      note + f"; sample period {stream.dt_nominal * 1e3:.4g} ms"))
+    params = ", ".join(f"{k} {v:g}" for k, v in COMPENSATED_PARAMS.items())
     comp = ("VQF 6D on the gyro minus the standstill bias (re-measured at each standstill whose specific force stayed "
-            "still{}), biasSigmaInit 0.1, biasSigmaMotion 0.02 deg/s, biasForgettingTime 1000 s")
-    still = _standstills(stream)
+            "still{}), " + params + " (deg/s, s)")
     rows.append(("standstill-compensated VQF online (gevi imu), causal",
                  tilt_stats(t, compensated_vqf_attitude(g, a, stream.dt_nominal, compensation(stream, still, b_g, causal=True)),
                             forward_hold=False), comp.format(": the latest")))
