@@ -20,7 +20,7 @@ SEQ_KEYS = {"name", "path", "simulate", "gt", "calib", "imu_calib", "kind", "cam
             "stride", "methods", "optional", "seed_per_trial"}
 SIM_KEYS = {"preset", "seed", "duration", "rate", "resolution", "baseline", "format", "imu_rate", "gyro_noise",
             "gyro_walk", "acc_noise", "acc_walk", "no_imu_noise", "distortion", "image_noise", "supersample", "a_max",
-            "moving_start"}
+            "moving_start", "disparity_shift"}
 METHOD_KEYS = {"name", "run", "trials"}
 BASELINE_KEYS = {"name", "path", "file", "format", "frame", "T_B_C0", "stamps", "optional", "sequences"}
 EVAL_KEYS = {"rpe_delta", "min_coverage", "max_diff", "plots", "online"}
@@ -44,6 +44,7 @@ class SimSpec:
     supersample: int = 2
     a_max: float | None = None
     moving_start: bool = False
+    disparity_shift_px: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -356,7 +357,8 @@ def _sim(ctx, node, where) -> SimSpec:
                    supersample=ctx.scalar(s, "supersample", where, int, 2,
                                           lambda v: None if 1 <= v <= 8 else "must be 1..8"),
                    a_max=ctx.scalar(s, "a_max", where, float, None, _positive),
-                   moving_start=ctx.scalar(s, "moving_start", where, bool, False))
+                   moving_start=ctx.scalar(s, "moving_start", where, bool, False),
+                   disparity_shift_px=ctx.scalar(s, "disparity_shift", where, float, 0.0))
 
 
 def _entry_name(ctx, mapping, item, section: str) -> str:

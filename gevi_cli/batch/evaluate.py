@@ -134,7 +134,11 @@ def evaluate_batch(specs, baselines, settings, inertial_methods: set, online: bo
                "frames_total": st.get("frames_total", 0), "frames_done": st.get("frames_done", 0),
                "frames_tracked": st.get("frames_tracked", 0), "elapsed_s": st.get("elapsed_s", 0.0),
                "lost_intervals": st.get("lost_intervals", []), "wall_s": marker.get("wall_s", 0.0),
-               "run_dir": spec.run_dir}
+               "run_dir": spec.run_dir,
+               # what ran beyond the published method: the disparity offset applied (px), the restart with it
+               "disparity_offset_px": float((st.get("disparity_offset") or {}).get("applied_px", 0.0)),
+               "disparity_offset_from_frame": (st.get("disparity_offset") or {}).get("applied_from_frame"),
+               "online_causal": bool(st.get("online_causal", True))}
         # a stereo-inertial run's roll/pitch error, as gevi run evaluated it (the report's tilt tables)
         run.update({k: v for k, v in (st.get("evaluation") or {}).items() if k.startswith("tilt_")})
         out.runs.append(run)

@@ -30,7 +30,10 @@ def cache_root(configured: str | None) -> Path:
 def render_key(sim: SimSpec) -> str:
     from gevi_cli import __version__
 
-    doc = {"layout": CACHE_LAYOUT, "gevi": __version__, **dataclasses.asdict(sim)}
+    fields = dataclasses.asdict(sim)
+    if not fields["disparity_shift_px"]:  # an option added later: renders without it keep their keys
+        del fields["disparity_shift_px"]
+    doc = {"layout": CACHE_LAYOUT, "gevi": __version__, **fields}
     h = hashlib.sha256(json.dumps(doc, sort_keys=True, default=list).encode()).hexdigest()[:12]
     return f"{sim.preset}_s{sim.seed}_{h}"
 
@@ -57,7 +60,8 @@ def simulation_config(sim: SimSpec):
     return SimulationConfig(sim.preset, seed=sim.seed, duration_s=sim.duration_s, rate_hz=sim.rate_hz,
                             resolution=tuple(sim.resolution) if sim.resolution else None, baseline_m=sim.baseline_m,
                             distortion=sim.distortion, image_noise=sim.image_noise, imu=imu,
-                            supersample=sim.supersample, a_max=sim.a_max, moving_start=sim.moving_start)
+                            supersample=sim.supersample, a_max=sim.a_max, moving_start=sim.moving_start,
+                            disparity_shift_px=sim.disparity_shift_px)
 
 
 def ensure_rendered(sims, cache: Path, echo=print, progress: bool = False) -> dict:

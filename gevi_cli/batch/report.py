@@ -244,6 +244,14 @@ def _markdown(cfg, specs, baselines, res, se3, posyaw, online, runtime, skipped,
                                                f"{r.reason}" for r in failed) + "."]
     if res.problems:
         L += ["", "Not evaluated: " + "; ".join(res.problems) + "."]
+    calibrated = [r for r in res.runs if r.get("disparity_offset_px")]
+    if calibrated:
+        L += ["", "## Beyond the published methods", "",
+              "These runs corrected the stereo pair's disparity offset found by the self-calibration (docs/method.md "
+              "4; `--set triangulation.self_calibrate=false` runs without it), from the frame given (0: the run restarted with it, and its online "
+              "trajectory is then not causal):", "", "| run | offset applied [px] | from frame |", "|---|---|---|"]
+        L += [f"| {r['run_id']} | {r['disparity_offset_px']:+.3f} | {r['disparity_offset_from_frame']} |"
+              for r in calibrated]
     order = sorted(se3, key=lambda t: (t.key not in HEADLINE, HEADLINE.index(t.key) if t.key in HEADLINE else 0))
     L += ["", "## Accuracy (SE(3), body frame)", ""] + [render_markdown(t) for t in order]
     if posyaw:
@@ -251,6 +259,10 @@ def _markdown(cfg, specs, baselines, res, se3, posyaw, online, runtime, skipped,
         L += [render_markdown(t) for t in posyaw if "rot_mean" not in t.key]
     if online:
         L += ["## Online trajectories (as tracked, before the BA of their window), SE(3)", ""]
+        restarted = [r["run_id"] for r in res.runs if not r.get("online_causal", True)]
+        if restarted:
+            L += ["Not causal (restarted with the disparity offset found later in the run): "
+                  + ", ".join(restarted) + ".", ""]
         L += [render_markdown(t) for t in online]
     L += ["## Runtime", "", render_markdown(runtime)]
     if pngs:

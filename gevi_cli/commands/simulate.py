@@ -11,7 +11,7 @@ from gevi_cli.simulate.presets import PRESET_NAMES, parse_resolution
 MAV_MIN_DURATION_S = 20.0
 #: options that only concern images: refused with the IMU-only mav preset
 IMAGE_OPTIONS = ("--rate", "--resolution", "--baseline", "--no-distortion", "--no-image-noise", "--supersample",
-                 "--workers", "--name")
+                 "--disparity-shift", "--workers", "--name")
 
 EPILOG = """\b
 Examples:
@@ -55,6 +55,9 @@ Examples:
 @click.option("--no-noise-model", is_flag=True,
               help="IMU-only output: leave the noise densities out of imu0/sensor.yaml (a recording that states none).")
 @click.option("--moving-start", is_flag=True, help="Hovering presets: in motion from the first frame (no still start).")
+@click.option("--disparity-shift", type=click.FloatRange(min=-20, max=20), default=0.0, show_default=True,
+              help="Render the right image moved right by this many pixels, the calibration unchanged: a pair "
+                   "whose disparities all read this much short (a known disparity offset).")
 @click.option("--workers", type=click.IntRange(1, 64), help="Render processes [min(2, CPUs)].")
 @click.option("--name", help="Bag base name for --format bag [preset name].")
 @click.option("--overwrite", is_flag=True, help="Replace OUT_DIR if it is a previous gevi simulate output.")
@@ -62,7 +65,7 @@ Examples:
 @click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
 def command(preset, out_dir, fmt, duration, rate, resolution, baseline, seed, imu_rate, gyro_noise, gyro_walk,
             acc_noise, acc_walk, no_imu_noise, no_distortion, no_image_noise, supersample, a_max, imu_only, no_noise_model,
-            moving_start, workers, name, overwrite, sample, quiet):
+            moving_start, disparity_shift, workers, name, overwrite, sample, quiet):
     """Render a synthetic stereo-IMU sequence with exact ground truth.
 
     PRESET is one of pool-easy, pool-hard, euroc-like, kitti-like, kitti-highway, mav; OUT_DIR is created (it must
@@ -132,7 +135,8 @@ def command(preset, out_dir, fmt, duration, rate, resolution, baseline, seed, im
         imu = imu.noise_free()
     config = SimulationConfig(preset, seed=seed, duration_s=duration, rate_hz=rate, resolution=res,
                               baseline_m=baseline, distortion=not no_distortion, image_noise=not no_image_noise,
-                              imu=imu, supersample=supersample, a_max=a_max, moving_start=moving_start)
+                              imu=imu, supersample=supersample, a_max=a_max, moving_start=moving_start,
+                              disparity_shift_px=disparity_shift)
     result = simulate(config, out_dir, fmt, overwrite=overwrite, name=name, progress=not quiet, workers=workers)
     click.echo(str(result))
 

@@ -64,8 +64,9 @@ class TriangulationConfig:
     max_depth_m: Float = setting(100.0, "points farther than this are not used (m)", gt=0, inf=True)
     min_disparity_px: Float = setting(0.0, "points with less stereo disparity than this are not used (px): a depth cap the "
                                        "same for every baseline", ge=0)
-    self_calibrate: Bool = setting(True, "estimate the stereo pair's disparity offset from the tracked frames' two-view "
-                                     "geometry and add it to the keyframes' disparities")
+    self_calibrate: Bool = setting(True, "estimate the stereo pair's disparity offset from the tracked steps (pose and "
+                                     "offset fitted jointly) and, once it is told from zero, add that one value to "
+                                     "the keyframes' disparities (restarting the run if found early)")
 
     _order = model_validator(mode="after")(ordered)
 

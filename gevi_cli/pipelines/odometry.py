@@ -353,7 +353,8 @@ class KeyframeOdometry:
         timings["pose"] = time.perf_counter() - t2
         if self.disparity_offset is not None:
             raw = (m.z[:, 0] - m.y[:, 0]) * self.camera.fx - self.kf.disparity_offset_px
-            self.disparity_offset.observe(self.index, m.z, m.q, raw, T_ck)
+            self.disparity_offset.observe(self.index, self.kf.index, m.z, m.q, raw, T_ck, self.camera.fx,
+                                          self.camera.baseline)
         disp_px = float(np.mean(np.linalg.norm(m.q - m.z, axis=1))) * self.camera.f
         self._last = (m.p, m.q)
         return T_ck, n_match, len(m.ids), disp_px
@@ -391,6 +392,8 @@ class KeyframeOdometry:
         if len(new) >= MIN_KF_POINTS:
             self.kf = new
             res.keyframe = True
+            if self.disparity_offset is not None:
+                self.disparity_offset.keyframe_made(new.index, new.disparity_offset_px)
         elif self.kf is None or res.status != OK:
             self.kf = None  # nothing to track against until a frame gives enough stereo points
         self.window = []

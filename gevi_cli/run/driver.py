@@ -8,7 +8,10 @@ every pose it computed in its folder, and ``status.json`` says how it ended.
 When the odometry's stereo self-calibration first finds the pair's disparity offset
 (:mod:`gevi_cli.pipelines.disparity_offset`), every keyframe so far was made without it: the driver
 restarts the run once from its first frame with a fresh odometry (``rebuild``) carrying the estimate, and
-the sinks start over (``restart``), so the run's output is made with one calibration throughout.
+the sinks start over (``restart``), so the run's output is made with one calibration throughout.  The
+restart happens only within the first keyframes (:data:`~gevi_cli.pipelines.disparity_offset.RESTART_MAX_KEYFRAMES`);
+an offset found later applies from the next keyframe on.  ``status.json`` then describes the second pass
+(``elapsed_s`` and frames as in ``timing.csv``), with the first pass's frames and time in ``first_pass``.
 """
 from __future__ import annotations
 
@@ -90,16 +93,20 @@ def run_odometry(source, odometry: Odometry, status: RunStatus, sinks, *, T_B_C0
                                           "frames": n, "reason": reason})
             lost_open = None
 
-    def restart_calibrated(through: int):
-        """A fresh odometry carrying the disparity offset found at frame ``through``, and the run begun again."""
-        nonlocal odometry, frames, lost_open
+    def restart_calibrated():
+        """A fresh odometry carrying the disparity offset just found, and the run begun again."""
+        nonlocal odometry, frames, lost_open, t_run
         found = odometry.disparity_offset
-        warn(f"stereo disparity offset {found.value:.2f} px found after {status.frames_done + 1} frames: restarting "
-             "from the first frame with the corrected pair")
+        est = found.found
+        warn(f"stereo disparity offset {est.value_px:.2f} +- {est.total_sigma_px:.2f} px found after "
+             f"{status.frames_done + 1} frames: restarting from the first frame with the corrected pair")
         frames.close()
         odometry = rebuild()
-        odometry.disparity_offset = found.carried(through=through)
-        status.restarted_after_frames = status.frames_done + 1
+        odometry.disparity_offset = found.carried()
+        now = time.perf_counter()
+        status.first_pass = {"frames": status.frames_done + 1, "elapsed_s": now - t_run}
+        status.online_causal = False
+        t_run = now
         status.frames_done = status.frames_tracked = status.keyframes = 0
         for name in ("lost_intervals", "bridged_frames", "inertial_frames", "skipped_frames"):
             getattr(status, name).clear()
@@ -132,7 +139,7 @@ def run_odometry(source, odometry: Odometry, status: RunStatus, sinks, *, T_B_C0
             res = odometry.track(frame)
             offset = odometry.disparity_offset
             if rebuild is not None and offset is not None and offset.calls_for_restart:
-                restart_calibrated(res.index)
+                restart_calibrated()
                 continue
             res.timings["read"] = t_read
             total = time.perf_counter() - t0 + t_read
@@ -185,8 +192,7 @@ def run_odometry(source, odometry: Odometry, status: RunStatus, sinks, *, T_B_C0
         status.elapsed_s = time.perf_counter() - t_run
         status.pose_fallbacks = int(odometry.fallbacks)
         if odometry.disparity_offset is not None:
-            status.disparity_offset_px = odometry.disparity_offset.value
-            status.disparity_offset_steps = len(odometry.disparity_offset.steps)
+            status.disparity_offset = odometry.disparity_offset.record()
         for sink in sinks:
             sink.close(status)
     return RunOutcome(status, 0 if status.state == "ok" else 3)

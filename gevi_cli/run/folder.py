@@ -75,11 +75,15 @@ class RunStatus:
     frames_tracked: int = 0
     keyframes: int = 0
     pose_fallbacks: int = 0  # frames whose pose step started from SQPnP (coplanar points)
-    # the stereo pair's disparity offset as self-calibrated (px; 0: none corrected) and the steps it rests on
-    disparity_offset_px: float = 0.0
-    disparity_offset_steps: int = 0
-    # frames the run had tracked when it first found the offset and restarted from its first frame with it (0: none)
-    restarted_after_frames: int = 0
+    # the stereo pair's disparity offset (pipelines.disparity_offset.DisparityOffset.record): the estimate with
+    # its uncertainty, the value applied and from which frame, whether the run restarted; {}: self-calibration off
+    disparity_offset: dict = field(default_factory=dict)
+    # a run restarted with the offset: the first pass's frames and wall time (s); {}: no restart.  The rest of
+    # this file, timing.csv and the trajectories describe the second pass
+    first_pass: dict = field(default_factory=dict)
+    # the online trajectory is causal (each pose from the frames up to it); False after a restart, whose frames
+    # were re-tracked with an offset found from frames after them
+    online_causal: bool = True
     lost_intervals: list = field(default_factory=list)  # {"start_s", "end_s", "frames", "first_index", "reason"}
     bridged_frames: list = field(default_factory=list)  # frame indices bridged at constant velocity
     inertial_frames: list = field(default_factory=list)  # GeVI: not tracked visually, carried by the IMU alone

@@ -271,6 +271,11 @@ def _execute(req: RunRequest, echo):
     fps = st.frames_done / st.elapsed_s if st.elapsed_s > 0 else float("nan")
     echo(f"{st.frames_tracked}/{st.frames_done} frames tracked, {st.keyframes} keyframes, "
          f"{st.elapsed_s:.2f} s ({fps:.1f} frames/s)")
+    if st.first_pass:
+        echo(f"before that, a first pass of {st.first_pass['frames']} frames in {st.first_pass['elapsed_s']:.2f} s "
+             "(status.json first_pass); traj_online_body.tum is not causal after the restart")
+    if st.disparity_offset:
+        echo(f"stereo disparity offset: {describe_offset(st.disparity_offset)}")
     t0_s = int(source.stamps_ns[req.start]) * 1e-9
     for iv in st.lost_intervals[:5]:
         echo(f"tracking lost at {iv['start_s'] - t0_s:.3f} s (frame {iv['first_index']}, {iv['frames']} frame(s) bridged): "
@@ -390,3 +395,17 @@ def _write_one(run_dir: Path, req: RunRequest, cfg, truth, seq_name: str, status
 def _metres(x: float) -> str:
     """Metres with 4 significant digits below 10 cm (sub-millimetre runs stay readable)."""
     return f"{x:.4f} m" if not x < 0.1 else f"{x:.4g} m"
+
+
+def describe_offset(rec: dict) -> str:
+    """One line on the self-calibrated disparity offset of a run (``status.json`` ``disparity_offset``)."""
+    if rec.get("estimate_px") is None:
+        return f"no estimate ({rec.get('steps', 0)} steps counted); none applied"
+    spread = "no spread yet" if rec.get("sigma_px") is None else f"+- {rec['sigma_px']:.3f} (spread)"
+    est = (f"estimate {rec['estimate_px']:+.3f} px {spread} +- {rec['systematic_px']:.3f} (systematic) over "
+           f"{rec['keyframes']} keyframe(s)")
+    if not rec.get("applied_px"):
+        return est + "; not distinguishable from 0, none applied"
+    how = "the run restarted with it" if rec.get("restarted") else f"applied from frame {rec['applied_from_frame']}"
+    return f"{est}; {rec['applied_px']:+.3f} px applied, found at frame {rec['found_at_frame']}, {how}"
+

@@ -52,6 +52,9 @@ class SimulationConfig:
         supersample: sub-samples per pixel and axis.
         a_max: peak acceleration of hovering presets [m/s^2] (None: the preset's).
         moving_start: hovering presets start in full motion (no still start, no ramp).
+        disparity_shift_px: the right image is rendered moved right by this many pixels (its principal
+            point shifted) while the written calibration keeps the true one, so every measured disparity
+            reads this much short: a rectified pair with a known disparity offset.
     """
 
     preset: str
@@ -66,6 +69,7 @@ class SimulationConfig:
     supersample: int = 2
     a_max: float | None = None
     moving_start: bool = False
+    disparity_shift_px: float = 0.0
 
     @property
     def spec(self) -> PresetSpec:
@@ -84,7 +88,8 @@ class SimulationConfig:
                        image_noise=bool(o["image_noise"]), imu=ImuParams(**desc["imu"]),
                        supersample=int(o["supersample"]),
                        a_max=float(o["a_max"]) if "a_max" in o else None,
-                       moving_start=bool(o.get("moving_start", False)))
+                       moving_start=bool(o.get("moving_start", False)),
+                       disparity_shift_px=float(o.get("disparity_shift_px", 0.0)))
         except (KeyError, TypeError, ValueError) as err:
             raise ValueError(f"not a gevi simulate description ({type(err).__name__}: {err})") from None
 
@@ -179,8 +184,11 @@ class SimulatedSequence:
 
     @cached_property
     def renderers(self) -> tuple[CameraRenderer, CameraRenderer]:
+        cam1 = self.rig.cam1
+        if self.config.disparity_shift_px:
+            cam1 = replace(cam1, cx=cam1.cx + self.config.disparity_shift_px)
         r0 = CameraRenderer(self.rig.cam0, self.config.supersample)
-        r1 = r0 if self.rig.cam1 == self.rig.cam0 else CameraRenderer(self.rig.cam1, self.config.supersample)
+        r1 = r0 if cam1 == self.rig.cam0 else CameraRenderer(cam1, self.config.supersample)
         return r0, r1
 
     def render_frame(self, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -266,6 +274,7 @@ class SimulatedSequence:
                 # only when set, so that default renders keep their exact simulation.yaml
                 **({"a_max": float(c.a_max)} if c.a_max is not None else {}),
                 **({"moving_start": True} if c.moving_start else {}),
+                **({"disparity_shift_px": float(c.disparity_shift_px)} if c.disparity_shift_px else {}),
             },
             "imu": imu,
             "sensor": asdict(self.sensor),

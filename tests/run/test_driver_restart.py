@@ -1,11 +1,14 @@
-"""The run driver restarts a run once, from its first frame, when the stereo self-calibration first finds
-the pair's disparity offset (gevi_cli.run.driver): what the first pass handed on is superseded, every frame
-reaches the sinks (folder and memory) exactly once, and the restarted odometry carries the estimate."""
+"""The run driver restarts a run once, from its first frame, when the stereo self-calibration finds the
+pair's disparity offset within its first keyframes (gevi_cli.run.driver): what the first pass handed on is
+superseded, every frame reaches the sinks (folder and memory) exactly once, the restarted odometry carries
+the one fixed value, and status.json says what ran (the offset, the first pass, the online trajectory's
+causality).  Found later, the offset applies from the next keyframe on, without a restart."""
 import json
 
 import numpy as np
 
-from gevi_cli.pipelines.disparity_offset import DisparityOffset
+from gevi_cli.pipelines import disparity_offset as mod
+from gevi_cli.pipelines.disparity_offset import DisparityOffset, Step
 from gevi_cli.pipelines.types import FINAL, ONLINE, FrameResult, pose_events
 from gevi_cli.run.driver import run_odometry
 from gevi_cli.run.folder import RunStatus
@@ -24,12 +27,13 @@ class _Frames:
 
 
 class _StubOdometry:
-    """Moves 1 m per frame along x; its disparity offset becomes known (0.8 px) at frame ``found_at``."""
+    """Moves 1 m per frame along x and makes a keyframe at every frame; its self-calibration reads 0.8 px on
+    every keyframe from frame ``found_from`` on (found MIN_KEYFRAMES keyframes later)."""
 
     state_columns, state_file, fallbacks = (), "states.csv", 0
 
-    def __init__(self, found_at):
-        self.found_at, self.index = found_at, -1
+    def __init__(self, found_from):
+        self.found_from, self.index = found_from, -1
         self.disparity_offset = DisparityOffset()
         self.carried_value = None  # the offset the odometry had when it tracked its first frame
 
@@ -37,8 +41,9 @@ class _StubOdometry:
         self.index += 1
         if self.index == 0:
             self.carried_value = self.disparity_offset.value
-        if self.index == self.found_at:
-            self.disparity_offset.steps.extend([0.8] * 5)
+        self.disparity_offset.keyframe_made(self.index, self.disparity_offset.value)
+        if self.index >= self.found_from:
+            self.disparity_offset.add(Step(self.index, self.index, 0.8, 0.05))
         T = np.eye(4)
         T[0, 3] = float(self.index)
         res = FrameResult(self.index, int(frame.t_ns), T)
@@ -56,30 +61,50 @@ def test_the_run_restarts_once_with_the_offset_and_every_frame_is_handed_on_once
     built = []
 
     def rebuild():
-        built.append(_StubOdometry(found_at=3))  # would find it again at frame 3: the carried estimate must win
+        built.append(_StubOdometry(found_from=0))  # would find it again: the carried value must win
         return built[-1]
 
     memory, folder, status = MemorySink(), FolderSink(tmp_path, kitti_rows=False), RunStatus()
-    out = run_odometry(_Frames(10), _StubOdometry(found_at=3), status, [memory, folder], T_B_C0=np.eye(4),
+    out = run_odometry(_Frames(10), _StubOdometry(found_from=0), status, [memory, folder], T_B_C0=np.eye(4),
                        start=0, stop=10, progress=False, warn=lambda msg: None, rebuild=rebuild)
     assert out.exit_code == 0 and len(built) == 1
     restarted = built[0]
-    assert restarted.carried_value == 0.8 and restarted.disparity_offset.observed_through == 3
-    assert status.restarted_after_frames == 4 and status.frames_done == 10 == status.frames_tracked
+    found_at = mod.MIN_KEYFRAMES - 1  # the frame whose step made the evidence
+    assert restarted.carried_value == 0.8 and restarted.disparity_offset.restarted
+    assert status.first_pass["frames"] == found_at + 1 and status.first_pass["elapsed_s"] >= 0
+    assert not status.online_causal and status.frames_done == 10 == status.frames_tracked
+    rec = status.disparity_offset
+    assert rec["applied_px"] == rec["estimate_px"] == 0.8 and rec["restarted"] and rec["found_at_frame"] == found_at
+    assert rec["applied_from_frame"] == 0 and rec["diagnostic_steps"] == 10 and rec["steps"] == mod.MIN_KEYFRAMES
     assert [r[0] for r in memory.frame_rows] == list(range(10))
     assert [r[0] for r in memory.final_rows] == [i * 100_000_000 for i in range(10)]
     rows = (tmp_path / "traj_body.tum").read_text().splitlines()
     assert len([r for r in rows if not r.startswith("#")]) == 10
     assert len((tmp_path / "frames.csv").read_text().splitlines()) == 11  # header + 10 frames
     saved = json.loads((tmp_path / "status.json").read_text())
-    assert saved["restarted_after_frames"] == 4 and saved["disparity_offset_px"] == 0.8
+    assert saved["disparity_offset"] == rec and saved["first_pass"] == status.first_pass
+    assert saved["online_causal"] is False
+
+
+def test_an_offset_found_after_the_first_keyframes_applies_without_a_restart():
+    built = []
+    late = mod.RESTART_MAX_KEYFRAMES + 2
+    memory, status = MemorySink(), RunStatus()
+    run_odometry(_Frames(late + 10), _StubOdometry(found_from=late), status, [memory], T_B_C0=np.eye(4), start=0,
+                 stop=late + 10, progress=False, warn=lambda msg: None, rebuild=lambda: built.append(1))
+    rec = status.disparity_offset
+    assert not built and status.first_pass == {} and status.online_causal
+    assert rec["applied_px"] == 0.8 and not rec["restarted"] and rec["found_at_frame"] == late + mod.MIN_KEYFRAMES - 1
+    assert rec["applied_from_frame"] == late + mod.MIN_KEYFRAMES  # the next keyframe
+    assert [r[0] for r in memory.frame_rows] == list(range(late + 10))
 
 
 def test_no_rebuild_means_no_restart():
     memory, status = MemorySink(), RunStatus()
-    run_odometry(_Frames(6), _StubOdometry(found_at=2), status, [memory], T_B_C0=np.eye(4), start=0, stop=6,
+    run_odometry(_Frames(8), _StubOdometry(found_from=0), status, [memory], T_B_C0=np.eye(4), start=0, stop=8,
                  progress=False, warn=lambda msg: None)
-    assert status.restarted_after_frames == 0 and [r[0] for r in memory.frame_rows] == list(range(6))
+    assert status.first_pass == {} and [r[0] for r in memory.frame_rows] == list(range(8))
+    assert status.disparity_offset["applied_from_frame"] == mod.MIN_KEYFRAMES
 
 
 def test_a_gevi_run_restarts_with_its_imu_and_writes_each_frame_once(pool_render, tmp_path, monkeypatch, capsys):
@@ -95,8 +120,9 @@ def test_a_gevi_run_restarts_with_its_imu_and_writes_each_frame_once(pool_render
 
     def observe(self, index, *args):
         real(self, index, *args)
-        if index == 20 and self.observed_through < 0:
-            self.steps.extend([0.3] * mod.MIN_STEPS)
+        if index == 20 and not self.restarted:
+            for k in range(mod.MIN_KEYFRAMES):
+                self.add(Step(index, 1000 + k, 0.3, 0.05))
 
     monkeypatch.setattr(mod.DisparityOffset, "observe", observe)
     out = tmp_path / "run"
@@ -105,7 +131,7 @@ def test_a_gevi_run_restarts_with_its_imu_and_writes_each_frame_once(pool_render
     assert "restarting from the first frame" in err
     status = json.loads((out / "status.json").read_text())
     n = status["frames_total"]
-    assert status["restarted_after_frames"] == 21 and status["disparity_offset_px"] == 0.3
+    assert status["first_pass"]["frames"] == 21 and status["disparity_offset"]["applied_px"] == 0.3
     assert status["state"] == "ok" and status["frames_done"] == status["frames_tracked"] == n
     frames = pd.read_csv(out / "frames.csv")
     assert list(frames["index"]) == list(range(n))
