@@ -105,8 +105,9 @@ def _describe_sequence(seq, path, echo) -> None:
     else:
         cov = frame_coverage(seq.stamps_ns, gt)
         gt_rate = 1e9 / float(np.median(np.diff(gt.t_ns))) if len(gt) > 1 else 0.0
+        src = f" from {seq.groundtruth_source}" if seq.groundtruth_source is not None else ""
         echo(f"groundtruth   {len(gt)} poses ({gt.frame} frame) at {gt_rate:.0f} Hz, "
-             f"{gt.duration_s:.1f} s, path {gt.path_length_m:.1f} m")
+             f"{gt.duration_s:.1f} s, path {gt.path_length_m:.1f} m{src}")
         echo(f"GT coverage   {cov.describe()}")
     for warning in seq.warnings:
         echo(f"warning: {warning}", err=True)

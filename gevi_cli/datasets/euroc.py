@@ -243,17 +243,30 @@ class EurocSequence(Sequence):
         if self._gt_override is not None:
             gt = read_trajectory(self._gt_override, name="groundtruth", frame="body")
             self.warnings.extend(gt.meta["warnings"])
+            self._groundtruth_source = self._gt_override
             return gt
         csv = self.mav0 / "state_groundtruth_estimate0" / "data.csv"
-        if csv.is_file():
-            gt = read_trajectory(csv, name="groundtruth", frame="body")
+        found = csv if csv.is_file() else self._groundtruth_beside()
+        if found is not None:
+            gt = read_trajectory(found, name="groundtruth", frame="body")
             self.warnings.extend(gt.meta["warnings"])
+            self._groundtruth_source = found
             return gt
         return self._fallback_groundtruth()
 
+    def _groundtruth_beside(self) -> Path | None:
+        """The one body-pose file in a ``groundtruth/`` folder next to ``mav0/`` (TUM or EuRoC CSV), as copies
+        of EuRoC sequences often carry it; None when there is none or several (a warning names them)."""
+        folder = self.mav0.parent / "groundtruth"
+        files = sorted(p for p in folder.glob("*") if p.suffix in (".txt", ".csv", ".tum")) if folder.is_dir() else []
+        if len(files) > 1:
+            self.warnings.append(f"{folder}: {len(files)} trajectory files ({', '.join(p.name for p in files)}); "
+                                 "none taken as the ground truth (pass --gt FILE)")
+        return files[0] if len(files) == 1 else None
+
     def _fallback_groundtruth(self) -> Trajectory | None:
-        self.warnings.append(f"{self.mav0 / 'state_groundtruth_estimate0' / 'data.csv'}: missing; "
-                             "no ground truth (pass --groundtruth FILE)")
+        self.warnings.append(f"{self.mav0 / 'state_groundtruth_estimate0' / 'data.csv'}: missing, and no "
+                             f"single file in {self.mav0.parent / 'groundtruth'}/; no ground truth (pass --gt FILE)")
         return None
 
     # ----------------------------------------------------------------------------------- images

@@ -121,6 +121,11 @@ class Sequence(abc.ABC):
     def groundtruth(self) -> Trajectory | None:
         return None
 
+    @property
+    def groundtruth_source(self) -> Path | None:
+        """The file :attr:`groundtruth` was read from (None: none, or not from one file)."""
+        return getattr(self, "_groundtruth_source", None)
+
     def __len__(self) -> int:
         return len(self.stamps_ns)
 

@@ -292,6 +292,8 @@ def _execute(req: RunRequest, echo):
         plot_imu_states(run_dir / "imu_states.csv", run_dir / "imu_states.png")
     pair = None
     if result.evaluations:
+        if req.groundtruth is None and source.groundtruth_source is not None:
+            echo(f"ground truth: {source.groundtruth_source} (the sequence's own; --gt FILE for another)")
         pair = _write_evaluation(run_dir, req, cfg, result, seq_name, st, echo)
     else:
         echo("no ground truth: not evaluated (give --gt FILE)")

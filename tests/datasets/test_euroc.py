@@ -176,3 +176,36 @@ def test_gt_is_the_option_name_everywhere(euroc_micro, capsys):
     for opt in ("--gt", "--groundtruth"):
         code, out, _ = run_cli(["info", euroc_micro, opt, gt], capsys)
         assert code == 0 and "GT coverage   95 of 95 frames" in out
+
+
+def _linked_copy(euroc_micro, tmp_path, gt_files):
+    """euroc_micro's mav0 (linked, without a state_groundtruth_estimate0 data.csv) with ``gt_files`` from its
+    groundtruth/ folder linked into a groundtruth/ folder beside it."""
+    root = tmp_path / "seq"
+    (root / "mav0").mkdir(parents=True)
+    for part in ("cam0", "cam1", "imu0", "body.yaml"):
+        (root / "mav0" / part).symlink_to(euroc_micro / "mav0" / part)
+    (root / "groundtruth").mkdir()
+    for name in gt_files:
+        (root / "groundtruth" / name).symlink_to(euroc_micro / "groundtruth" / name)
+    return root
+
+
+def test_a_single_groundtruth_file_beside_mav0_is_the_ground_truth(euroc_micro, tmp_path, capsys):
+    """Copies of EuRoC sequences often carry the ground truth as groundtruth/<name>.txt instead of
+    mav0/state_groundtruth_estimate0/: one such file is taken, and gevi info says which."""
+    root = _linked_copy(euroc_micro, tmp_path, ["V1_01_easy.txt"])
+    seq = open_sequence(root)
+    assert seq.groundtruth is not None and len(seq.groundtruth) > 1000
+    assert seq.groundtruth_source == root / "groundtruth" / "V1_01_easy.txt"
+    code, out, _ = run_cli(["info", root], capsys)
+    assert code == 0 and f"from {root / 'groundtruth' / 'V1_01_easy.txt'}" in out
+
+
+def test_several_groundtruth_files_beside_mav0_are_not_guessed(euroc_micro, tmp_path):
+    root = _linked_copy(euroc_micro, tmp_path, ["V1_01_easy.txt", "V1_01_easy_original.txt"])
+    seq = open_sequence(root)
+    assert seq.groundtruth is None and seq.groundtruth_source is None
+    assert any("2 trajectory files" in w and "V1_01_easy_original.txt" in w for w in seq.warnings)
+    given = open_sequence(root, groundtruth=root / "groundtruth" / "V1_01_easy_original.txt")
+    assert given.groundtruth is not None and given.groundtruth_source.name == "V1_01_easy_original.txt"

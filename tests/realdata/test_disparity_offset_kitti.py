@@ -57,8 +57,14 @@ def test_kitti06_head_no_offset_applied(stride):
     json.dumps(vars(r.status))  # the figures are plain numbers, as status.json writes them
 
 
-def test_euroc_mh01_head_no_offset_applied():
-    seq = shared_path("euroc_mh01_head")
-    r = run(seq, method="cfo", groundtruth=shared_path("euroc_mh01_head", "groundtruth", "MH_01_easy.txt"))
-    rec = r.status.disparity_offset
-    assert rec["applied_px"] == 0.0 and not rec["restarted"] and r.status.first_pass == {}
+def test_euroc_mh01_head_no_offset_applied_and_its_own_groundtruth_found(tmp_path, capsys):
+    """EuRoC MH_01's head: no offset applied (its steps read about 0); with no --gt the run evaluates against
+    the sequence's groundtruth/MH_01_easy.txt and says so."""
+    out = tmp_path / "run"
+    code, stdout, err = run_cli(["run", shared_path("euroc_mh01_head"), "--method", "cfo", "-o", out], capsys)
+    assert code == 0, err
+    assert f"ground truth: {shared_path('euroc_mh01_head', 'groundtruth', 'MH_01_easy.txt')}" in stdout
+    status = json.loads((out / "status.json").read_text())
+    rec = status["disparity_offset"]
+    assert rec["applied_px"] == 0.0 and not rec["restarted"] and status["first_pass"] == {}
+    assert status["evaluation"]["ate_m"] < 0.01 and status["frames_tracked"] == 150
