@@ -121,6 +121,7 @@ def evaluate_batch(specs, baselines, settings, inertial_methods: set, online: bo
     load = _gt_loader()
     out = BatchResults()
     seq_gt_path = {}
+    seq_run_dir = {}  # a run of each sequence: the frames a baseline is judged over, as the runs are
     for spec in specs:
         marker = read_marker(spec.run_dir)
         if marker is None:
@@ -129,6 +130,7 @@ def evaluate_batch(specs, baselines, settings, inertial_methods: set, online: bo
         trial = f"trial{spec.trial}"
         gt_path = spec.inputs.gt or spec.source
         seq_gt_path.setdefault(spec.sequence, gt_path)
+        seq_run_dir.setdefault(spec.sequence, Path(spec.run_dir))
         run = {"run_id": spec.run_id, "method": spec.method, "sequence": spec.sequence, "trial": spec.trial,
                "seed": spec.seed, "state": marker["state"], "message": marker.get("message", ""),
                "frames_total": st.get("frames_total", 0), "frames_done": st.get("frames_done", 0),
@@ -197,6 +199,7 @@ def evaluate_batch(specs, baselines, settings, inertial_methods: set, online: bo
             continue
         try:
             gt, T_seq, raw = load(seq_gt_path[b.sequence])
+            gt = _clip_to_run(gt, seq_run_dir[b.sequence], settings.max_diff_s)
             T = _T(b.T_B_C0, T_seq)
             est = read_trajectory(b.path, name=b.name, frame=b.frame)
             if b.stamps_ns is not None:  # KITTI rows, one per frame the runs were given: their times
