@@ -79,13 +79,16 @@ def stage(default_factory, help: str = ""):
 @dataclass(frozen=True)
 class Applies:
     """Where a setting does something: ``methods`` (None: every method), ``inputs`` ("images": not for a
-    track export, "tracks": only for one; None: both), ``values`` (method -> the values it can run), and
-    why, for the error that refuses it elsewhere."""
+    track export, "tracks": only for one; None: both), ``values`` (method -> the values it can run),
+    ``requires`` (another setting's values under which it is read at all), and why, for the error that
+    refuses it elsewhere."""
 
     methods: tuple | None = None
     inputs: str | None = None
     values: dict | None = None
+    requires: tuple | None = None  # (dotted key, the values of it under which this setting is read)
     why: str = ""
+    requires_why: str = ""  # why, for ``requires`` (default: ``why``)
 
 
 def ordered(self):
@@ -263,16 +266,25 @@ def validate(cls, data: dict, where: str):
         raise GeviError(where, _message(cls, exc.errors()[0])) from None
 
 
-def refuse_inapplicable(cfg, default, method: str | None, kind: str | None, where: str, flag: bool = False) -> None:
+def refuse_inapplicable(cfg, default, method: str | None, kind: str | None, where: str, flag: bool = False,
+                        own=None) -> None:
     """A setting that does nothing for ``method`` or for input ``kind`` must keep its ``default``
     value (the configuration of ``default``, before any user layer); else one line at ``where``
     ("does not apply to cfo", "does not apply to ov2slam-tracks sequences").  ``flag``: ``where`` is
-    the option that set it, so the key is not repeated."""
+    the option that set it, so the key is not repeated.  A setting another one turns off (``requires``)
+    must keep the value of ``own`` (gevi's own configuration for the input, its kind's file included;
+    default: ``default``)."""
+    own = default if own is None else own
     for key, cls, name in leaves(type(cfg)):
         rule = applies(cls, name)
         if rule is None:
             continue
         value = get(cfg, key)
+        if rule.requires is not None and value != get(own, key):
+            other, values = rule.requires
+            if get(cfg, other) not in values:
+                raise GeviError(where, f"{key}={show(value)} does nothing with {other}={show(get(cfg, other))} "
+                                       f"({rule.requires_why or rule.why})")
         pre = "" if flag else f"{key}={show(value)}: "
         if rule.values and method in rule.values and value not in rule.values[method]:
             raise GeviError(where, f"{pre}does not apply to {method} ({rule.why})")

@@ -69,28 +69,35 @@ def expand(cfg: BatchConfig, out: Path) -> list[RunSpec]:
 
 
 def check_methods_fit(cfg: BatchConfig) -> None:
-    """GeVI needs an IMU: a gevi method on a kitti-format render is a config error (datasets are checked
-    by the run itself and recorded as crashed); a method that sets what does not apply to a track export
-    (``frontend.*``) is one too."""
+    """Each method against each sequence's kind of input, as `gevi run` would check it, at the door: GeVI
+    needs an IMU (a gevi method on a kitti-format render is a config error; datasets are checked by the
+    run itself and recorded as crashed), and a method that sets what does not apply to the input (``frontend.*``
+    or ``keyframe.*`` on a track export, ``verify.use_export_flags`` on images) is one too."""
     from gevi_cli.run.method_options import check_method_config
     from gevi_cli.run.session import is_track_export
 
     for seq in cfg.sequences:
-        if seq.sim is None:
-            if seq.path is not None and not seq.skip_reason and (seq.inputs.kind == "ov2slam-tracks" or (
-                    seq.inputs.kind is None and is_track_export(Path(seq.path)))):
-                for m in cfg.methods:
-                    if seq.methods is None or m.name in seq.methods:
-                        try:  # a track export is its own front end: frontend.* does not apply to it
-                            check_method_config(m.params, "ov2slam-tracks")
-                        except GeviError as exc:
-                            raise GeviError(f"{cfg.path}:{m.line}", f"methods: {m.name!r} on sequences.{seq.name}: "
-                                                                    f"{exc.one_line()}") from None
+        if seq.skip_reason:
             continue
-        for m in cfg.methods:
-            if (seq.methods is None or m.name in seq.methods) and m.method == "gevi" and seq.sim.fmt == "kitti":
-                raise GeviError(f"{cfg.path}:{seq.line}", f"sequences.{seq.name}: method {m.name!r} needs an IMU but "
-                                                          "a kitti-format render has none; list methods: for it")
+        methods = [m for m in cfg.methods if seq.methods is None or m.name in seq.methods]
+        if seq.sim is not None:
+            kind = seq.sim.fmt
+            for m in methods:
+                if m.method == "gevi" and seq.sim.fmt == "kitti":
+                    raise GeviError(f"{cfg.path}:{seq.line}", f"sequences.{seq.name}: method {m.name!r} needs an IMU "
+                                                              "but a kitti-format render has none; list methods: for it")
+        elif seq.path is None:
+            continue
+        elif seq.inputs.kind == "ov2slam-tracks" or (seq.inputs.kind is None and is_track_export(Path(seq.path))):
+            kind = "ov2slam-tracks"
+        else:
+            kind = seq.inputs.kind or "images"
+        for m in methods:
+            try:
+                check_method_config(m.params, kind)
+            except GeviError as exc:
+                raise GeviError(f"{cfg.path}:{m.line}", f"methods: {m.name!r} on sequences.{seq.name}: "
+                                                        f"{exc.one_line()}") from None
 
 
 @dataclass(frozen=True)

@@ -32,6 +32,8 @@ GEVI_ONLY = "GeVI only: {} of the stereo-inertial odometry"
 RANSAC_APPLIES = Applies(values={"cfo": ("5pt", "none")}, why="3pt is GeVI's upright RANSAC, it needs the IMU's "
                                                               "roll/pitch; cfo verifies with 5pt or none")
 TRACKS_ONLY = Applies(inputs="tracks", why="the outlier flags of a track export")
+#: the local BA's own settings: read only when it runs
+BA_ON = Applies(requires=("ba.enabled", (True,)), why="a setting of the local BA, which --no-ba turns off")
 
 
 @dataclass(config=STRICT)
@@ -41,7 +43,9 @@ class VerifyConfig:
     ransac: RansacMethod = setting("5pt", "first stage: '5pt' (OpenCV 5-point essential-matrix RANSAC), '3pt' (GeVI: upright "
                              "3-point RANSAC with the IMU roll/pitch, spec 7) or 'none'", applies=RANSAC_APPLIES)
     ransac_threshold_px: Float = setting(1.0, "RANSAC inlier threshold (Sampson distance, px); 3pt: the larger of this "
-                                          "and THRESHOLD_SIGMAS x the noise std", gt=0)
+                                          "and THRESHOLD_SIGMAS x the noise std", gt=0,
+                                          applies=Applies(requires=("verify.ransac", ("5pt", "3pt")),
+                                                          why="the RANSAC's threshold; ransac=none runs no RANSAC"))
     l1: L1Method = setting("irls", "second stage: l1-PnP drop of the worst fraction: 'irls' (exact l1 by IRLS + simplex polish, "
                           "same keep-mask as the LP), 'lp' (HiGHS), 'none'")
     use_export_flags: Bool = setting(False, "track exports only: drop the exporter's own outlier flags first", applies=TRACKS_ONLY)
@@ -115,6 +119,8 @@ MAX_MEDIAN_PX = 10.0  # a pose with a larger median reprojection error (px) is a
 class KeyframeConfig:
     """When a new keyframe is inserted (spec 12.1)."""
 
+    APPLIES: ClassVar[Applies] = Applies(inputs="images", why="a track export's keyframes are the exporter's")
+
     min_tracked_ratio: Float = setting(0.5, "new keyframe when verified matches < ratio * keyframe points ...", ge=0, le=1)
     min_tracked: Int = setting(100, "... or < this count", ge=0)
     max_mean_disp_px: Float = setting(30.0, "... or the mean displacement since the keyframe exceeds this (px)", gt=0)
@@ -125,8 +131,9 @@ class BAConfig:
     """Epipolar local BA over the last two keyframes and the frames between (spec 10)."""
 
     enabled: Bool = setting(True, "run the BA at each keyframe insertion")
-    kernel: Literal["truncated", "huber", "none"] = setting("truncated", "'truncated' (the authors' choice) or 'huber' (the same delta in both), 'none'")
-    delta_sigmas: Float = setting(3.0, "kernel threshold delta = this x the noise std sigma_hat", gt=0)
+    kernel: Literal["truncated", "huber", "none"] = setting("truncated", "'truncated' (the authors' choice) or 'huber' (the same delta in both), 'none'",
+                                                            applies=BA_ON)
+    delta_sigmas: Float = setting(3.0, "kernel threshold delta = this x the noise std sigma_hat", gt=0, applies=BA_ON)
 
 
 # Fixed values of the local BA (former settings, each at its former default; issue 46)
@@ -182,7 +189,11 @@ class FusionConfig:
     mode: Literal["bcd", "4dof"] = setting("bcd", "'bcd' (6-DOF refinement with the jointly estimated gravity-prior covariance) or '4dof' "
                            "(4-DOF step, roll/pitch from the IMU-only filter)")
     adaptive: Bool = setting(True, "estimate the gravity-prior covariance (false: spec 8's fixed-weight baseline, "
-                                "Sigma = (sigma_a / g)^2 I at the accelerometer noise floor)")
+                                "Sigma = (sigma_a / g)^2 I at the accelerometer noise floor)",
+                             applies=Applies(methods=("gevi",), requires=("fusion.mode", ("bcd",)),
+                                             why=GEVI_ONLY.format("the gravity fusion"),
+                                             requires_why="the BCD refinement's gravity prior; fusion.mode=4dof "
+                                                          "(--no-fusion) takes roll/pitch from the IMU alone"))
     acc_window_s: Float = setting(0.4, "acceleration compensation: remove the acceleration fitted to the tracked "
                                    "positions of the last this many seconds (s); 0: specific force only (the paper)",
                                   ge=0)

@@ -146,6 +146,7 @@ def resolve_config(req: RunRequest, kind: str | None, method: str = "cfo"):
             raise GeviError(kind_file, f"the configuration for {kind} sequences is missing (broken installation?)")
         layers.append((str(kind_file), load_yaml(kind_file), False))
         sources.append(f"gevi_cli/configs/{kind_file.name}")
+    own = build(OdometryConfig, layers)  # gevi's own configuration for this input, before the user's layers
     if req.config_file:
         layers.append((req.config_file, load_yaml(Path(req.config_file)), False))
         sources.append(req.config_file)
@@ -158,7 +159,7 @@ def resolve_config(req: RunRequest, kind: str | None, method: str = "cfo"):
             layers.append((flag, overrides(value), True))
 
     def check(cfg, where, is_flag):
-        refuse_inapplicable(cfg, default, method, kind, where, is_flag)
+        refuse_inapplicable(cfg, default, method, kind, where, is_flag, own)
 
     return build(OdometryConfig, layers, check), sources
 

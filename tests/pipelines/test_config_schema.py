@@ -260,3 +260,50 @@ def test_a_batch_refuses_front_end_settings_on_a_track_export(tmp_path):
     assert err.value.one_line() == (f"{f}:2: methods: 'cfo --set frontend.cell_px=16' on sequences.k04: --set: "
                                     "frontend.cell_px=16: does not apply to ov2slam-tracks sequences (a track export "
                                     "is its own front end)")
+
+
+# ------------------------------------------------------------------------- what another setting turns off
+SWITCHED_OFF = [
+    (["--no-ba", "--set", "ba.kernel=huber"], "--no-ba: ba.kernel=huber does nothing with ba.enabled=false"),
+    (["--set", "ba.delta_sigmas=2", "--no-ba"], "--no-ba: ba.delta_sigmas=2.0 does nothing with ba.enabled=false"),
+    (["--set", "verify.ransac=none", "--set", "verify.ransac_threshold_px=2"],
+     "--set: verify.ransac_threshold_px=2.0 does nothing with verify.ransac=none"),
+    (["--method", "gevi", "--no-fusion", "--no-adaptive"],
+     "--no-fusion: fusion.adaptive=false does nothing with fusion.mode=4dof"),
+]
+
+
+@pytest.mark.parametrize("args,message", SWITCHED_OFF)
+def test_a_setting_another_one_turns_off_is_refused(args, message, capsys):
+    """Accepted before and without effect (the trajectories identical to the byte): now one line."""
+    code, _, err = run_cli(["run", "--dump-config", *args], capsys)
+    assert code == 2 and err.startswith(f"gevi: error: {message}"), err
+
+
+def test_the_switched_on_forms_are_accepted(capsys):
+    for args in (["--set", "ba.kernel=huber"], ["--set", "verify.ransac_threshold_px=2"],
+                 ["--method", "gevi", "--no-adaptive"], ["--no-ba"], ["--method", "gevi", "--no-fusion"]):
+        assert run_cli(["run", "--dump-config", *args], capsys)[0] == 0, args
+
+
+def test_a_track_export_refuses_keyframe_settings():
+    from gevi_cli.errors import GeviError
+    from gevi_cli.run.session import RunRequest, resolve_config
+
+    req = RunRequest(sequence=None, sets=("keyframe.min_tracked=50",))
+    with pytest.raises(GeviError, match="keyframe.min_tracked=50: does not apply to ov2slam-tracks sequences"):
+        resolve_config(req, "ov2slam-tracks", "cfo")
+    resolve_config(req, "kitti", "cfo")
+
+
+def test_a_batch_refuses_a_method_that_does_not_fit_an_image_sequence_at_the_door(tmp_path):
+    """verify.use_export_flags on a render (images) is refused when the config is read, not per run."""
+    from gevi_cli.batch.config import load_batch_config
+    from gevi_cli.batch.plan import check_methods_fit
+    from gevi_cli.errors import GeviError
+
+    f = tmp_path / "b.yaml"
+    f.write_text("name: b\nroot: .\ntrials: 1\nmethods:\n  - {name: flags, run: cfo --set verify.use_export_flags=true}\n"
+                 "sequences:\n  - name: kl\n    simulate: {preset: kitti-like, seed: 1, duration: 2, format: kitti}\n")
+    with pytest.raises(GeviError, match="'flags' on sequences.kl: .*use_export_flags=true: does not apply to kitti"):
+        check_methods_fit(load_batch_config(f))
