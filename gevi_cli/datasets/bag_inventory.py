@@ -15,7 +15,7 @@ import numpy as np
 
 from gevi_cli.datasets import bag_streams as streams
 from gevi_cli.datasets.bagfile import bag_format, bag_root, describe_error, header_stamp, open_reader
-from gevi_cli.datasets.sequence import IMU_GAP_FACTOR, rate_hz
+from gevi_cli.datasets.sequence import GAP_FACTOR, rate_hz
 from gevi_cli.errors import DataError
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
@@ -85,7 +85,7 @@ def _imu_detail(s: streams.TopicSamples) -> str:
         order = np.sort(t)
         dt = np.diff(order)
         med = float(np.median(dt))
-        gaps = int((dt > IMU_GAP_FACTOR * med).sum()) if med > 0 else 0
+        gaps = int((dt > GAP_FACTOR * med).sum()) if med > 0 else 0
         longest = float(dt.max()) * 1e-9
         parts.append(f"{rate_hz(order):.1f} Hz, {gaps} gap{'s' if gaps != 1 else ''}"
                      + (f" (longest {longest:.3f} s)" if gaps else ""))

@@ -61,8 +61,9 @@ class ImuData:
                        self.gyro_random_walk, self.acc_noise_density, self.acc_random_walk)
 
 
-#: an IMU interval longer than this many median sample periods is a gap (gevi info, gevi imu, gevi run)
-IMU_GAP_FACTOR = 5.0
+#: an interval of a sampled stream (an IMU, a reference trajectory) longer than this many median sample periods
+#: is a gap (gevi info, gevi imu, the bag inventory; gevi run's default of imu.max_gap_factor)
+GAP_FACTOR = 5.0
 
 
 def rate_hz(t_ns: np.ndarray) -> float:

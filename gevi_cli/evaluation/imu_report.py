@@ -26,6 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from gevi_cli import estimators as est
+from gevi_cli.datasets.sequence import GAP_FACTOR
 from gevi_cli.inertial.attitude import (
     AttitudeFilterConfig,
     GravityAttitudeFilter,
@@ -38,6 +39,7 @@ from gevi_cli.inertial.imu_stream import ImuNoise, ImuStream
 from gevi_cli.inertial.reference_alignment import ReferenceAlignment, estimate_alignment
 from gevi_cli.inertial.standstill import (
     GRAVITY,
+    STILL_LIMITS,
     StandstillEstimate,
     imu_at_rest,
     standstill_bias_track,
@@ -47,10 +49,9 @@ from gevi_cli.inertial.standstill import (
 from gevi_cli.inertial.velocity_aided import VelocityAidedConfig, VelocityAidedFilter
 from gevi_cli.inertial.vqf_rows import compensated_vqf_attitude
 
-#: standstill detection on the IMU alone (no images here): windows of this length (s) ...
+#: standstill detection on the IMU alone (no images here): windows of this length (s) whose gyro std, |a| std
+#: and | mean |a| - g | stay below STILL_LIMITS (inertial.standstill, the same as GeVI's start)
 STILL_WINDOW_S = 0.5
-#: ... whose gyro std, |a| std and | mean |a| - g | stay below these (rad/s, m/s^2, m/s^2)
-STILL_LIMITS = (0.1, 0.5, 0.5)
 #: |mean |a| at rest - g| above this (m/s^2) is flagged, and the velocity-aided filter rescales the specific force
 ACC_SCALE_LIMIT = 0.3
 #: prior std of the starting velocity (m/s) when the stream does not start at rest
@@ -275,7 +276,7 @@ def _traj(t_ns, R):
 
 class TiltReference:
     """The reference attitude (Trajectory, IMU clock and frame), slerp-interpolated at any stamps inside
-    its span and not across its gaps (intervals over 5x its median); ``scored_t_ns``: only these stamps
+    its span and not across its gaps (intervals over GAP_FACTOR x its median); ``scored_t_ns``: only these stamps
     count (None: all)."""
 
     def __init__(self, gt, scored_t_ns=None):
@@ -284,7 +285,7 @@ class TiltReference:
         self.t_ns = gt.t_ns
         self._t0 = int(gt.t_ns[0])
         self._slerp = Slerp((gt.t_ns - self._t0) * 1e-9, Rotation.from_quat(gt.quat_xyzw))
-        self._gap_ns = 5 * float(np.median(np.diff(gt.t_ns))) if len(gt) > 1 else 0.0
+        self._gap_ns = GAP_FACTOR * float(np.median(np.diff(gt.t_ns))) if len(gt) > 1 else 0.0
         self.scored = None if scored_t_ns is None else np.asarray(scored_t_ns, dtype=np.int64)
 
     def tilt(self, t_ns, R):

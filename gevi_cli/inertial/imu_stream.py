@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from gevi_cli import estimators as est
-from gevi_cli.datasets.sequence import IMU_GAP_FACTOR
+from gevi_cli.datasets.sequence import GAP_FACTOR
 from gevi_cli.errors import GeviError
 from gevi_cli.estimators.preintegration import imu_segment
 from gevi_cli.inertial.standstill import WindowMoments
@@ -52,7 +52,7 @@ class ImuStream:
     """IMU samples on the camera clock with the helpers the stereo-inertial pipeline needs."""
 
     def __init__(self, t_ns, gyro, acc, noise: ImuNoise, time_offset_s: float = 0.0, source: str = "IMU",
-                 max_gap_factor: float = IMU_GAP_FACTOR):
+                 max_gap_factor: float = GAP_FACTOR):
         """``max_gap_factor``: an interval longer than this many median sample periods is a gap."""
         t = np.asarray(t_ns, dtype=np.int64)
         gyro = np.asarray(gyro, dtype=np.float64)
@@ -74,7 +74,7 @@ class ImuStream:
         self.noise_missing: tuple[str, ...] = ()  # the noise keys the dataset did not state (defaults used)
 
     @classmethod
-    def from_sequence(cls, imu, time_offset_s: float, source: str, warn=None, max_gap_factor: float = IMU_GAP_FACTOR) -> "ImuStream":
+    def from_sequence(cls, imu, time_offset_s: float, source: str, warn=None, max_gap_factor: float = GAP_FACTOR) -> "ImuStream":
         """From a dataset's :class:`~gevi_cli.datasets.sequence.ImuData`; missing noise -> defaults + warning."""
         values, missing = {}, []
         for key, default in DEFAULT_NOISE.items():

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from gevi_cli.datasets.sequence import GAP_FACTOR
+
 
 @dataclass(frozen=True)
 class ReferenceAlignment:
@@ -65,7 +67,7 @@ class ReferenceAlignment:
 
 def reference_rates(t_ns: np.ndarray, R: np.ndarray, min_dt_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Body rates ``Log(R_k^T R_k+s) / dt`` (rad/s) of a pose series over intervals of at least
-    ``min_dt_s``: (start ns, end ns, rates (m, 3)).  Intervals longer than 5x the median (gaps) dropped."""
+    ``min_dt_s``: (start ns, end ns, rates (m, 3)).  Intervals longer than GAP_FACTOR x the median (gaps) dropped."""
     t = np.asarray(t_ns, dtype=np.int64)
     dt_med = float(np.median(np.diff(t))) * 1e-9
     s = max(int(np.ceil(min_dt_s / dt_med - 1e-9)), 1)
@@ -73,7 +75,7 @@ def reference_rates(t_ns: np.ndarray, R: np.ndarray, min_dt_s: float) -> tuple[n
     dt = (b - a) * 1e-9
     rel = Rotation.from_matrix(np.transpose(R[:-s], (0, 2, 1)) @ R[s:])
     w = rel.as_rotvec() / dt[:, None]
-    keep = dt <= 5 * s * dt_med
+    keep = dt <= GAP_FACTOR * s * dt_med
     return a[keep], b[keep], w[keep]
 
 

@@ -53,6 +53,16 @@ def standstill_estimate(t_ns, gyro, acc) -> StandstillEstimate:
                               float(t[-1] - t[0]) * 1e-9 if len(t) > 1 else 0.0, len(t), gyro.std(0))
 
 
+#: at rest: gyro std per axis below this (rad/s; vibrating platforms reach 0.06)
+STILL_MAX_GYRO_STD = 0.1
+#: at rest: std of |a| below this (m/s^2)
+STILL_MAX_ACC_STD = 0.5
+#: at rest: | mean |a| - g | below this (m/s^2)
+STILL_MAX_GRAVITY_ERR = 0.5
+#: the three, in imu_at_rest's order (GeVI's start and gevi imu's standstills test the same)
+STILL_LIMITS = (STILL_MAX_GYRO_STD, STILL_MAX_ACC_STD, STILL_MAX_GRAVITY_ERR)
+
+
 def imu_at_rest(gyro, acc, max_gyro_std: float, max_acc_std: float, max_gravity_err: float,
                 gravity: float = GRAVITY) -> bool:
     """Loose IMU standstill test over a window: gyro std per axis, |a| std and |mean |a| - g| bounded.

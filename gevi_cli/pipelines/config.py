@@ -14,6 +14,7 @@ from pydantic import model_validator
 from pydantic.dataclasses import dataclass
 
 from gevi_cli.config import Applies, Bool, Float, Int, ordered, setting, stage
+from gevi_cli.datasets.sequence import GAP_FACTOR
 from gevi_cli.frontend.config import STRICT, FrontendConfig
 
 PnPMethod = Literal["be-w", "be", "ls", "epnp", "sqpnp"]
@@ -151,8 +152,12 @@ class ImuConfig:
 
     time_offset_s: Optional[Float] = setting(None, "camera-IMU time shift, t_imu = t_cam + shift (s); empty: the "
                                                "calibration's (Kalibr timeshift_cam_imu), else 0")
-    max_gap_factor: Float = setting(5.0, "an IMU interval longer than this many sample periods is a gap: the frame "
+    max_gap_factor: Float = setting(GAP_FACTOR, "an IMU interval longer than this many sample periods is a gap: the frame "
                                      "is tracked visually (6-DOF) and status.json says so", gt=1)
+
+
+STILL_LAG_S = 0.5  # the standstill's gyro bias leaves out its last this many seconds (its end is detected late)
+MAX_WINDOW_S = 6.0  # moving start: retry with a growing window up to this long (s)
 
 
 @dataclass(config=STRICT)
@@ -161,20 +166,15 @@ class InitConfig:
 
     APPLIES: ClassVar[Applies] = Applies(methods=("gevi",), why=GEVI_ONLY.format("the initialisation"))
     still_min_s: Float = setting(1.0, "a standstill start is initialised after this long at rest (s); gravity and gyro "
-                                  "bias re-estimated over the standstill while it lasts", gt=0.5)
+                                  "bias re-estimated over the standstill while it lasts", gt=STILL_LAG_S)
     window_s: Float = setting(2.0, "moving start: seconds of stereo odometry used by the stereo-IMU initialisation",
-                              gt=0, le=6.0)
+                              gt=0, le=MAX_WINDOW_S)
 
 
-# Fixed values of the initialisation (former settings, each at its former default; issue 46).  still_min_s must
-# exceed STILL_LAG_S and window_s stay within MAX_WINDOW_S (their domains above say so).
+# Fixed values of the initialisation (former settings, each at its former default; issue 46); STILL_LAG_S and
+# MAX_WINDOW_S above (the domains of still_min_s and window_s), the IMU rest limits in inertial.standstill.
 STILL_MAX_FLOW_PX = 2.0  # at rest: image motion below this (px, 90th percentile of a fitted similarity's residual)
-STILL_LAG_S = 0.5  # the standstill's gyro bias leaves out its last this many seconds (its end is detected late)
 STILL_PERSIST = 3  # ... moving on this many consecutive frames before the images say 'moving'
-STILL_MAX_GYRO_STD = 0.1  # at rest: gyro std per axis below this (rad/s; vibrating platforms reach 0.06)
-STILL_MAX_ACC_STD = 0.5  # at rest: std of |a| below this (m/s^2)
-STILL_MAX_GRAVITY_ERR = 0.5  # at rest: | mean |a| - 9.81 | below this (m/s^2)
-MAX_WINDOW_S = 6.0  # moving start: retry with a growing window up to this long (s)
 INIT_STRIDE = 2  # moving start: every this many frames is an initialisation pose
 BA_PRIOR_SIGMA = 0.05  # zero-mean prior on the accelerometer bias (m/s^2, spec 9.6)
 POSE_SIGMA_M = 0.001  # position noise of the stereo-odometry poses in the initialisation's weights (m)

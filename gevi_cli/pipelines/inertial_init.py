@@ -16,17 +16,21 @@ import numpy as np
 from gevi_cli import estimators as est
 from gevi_cli.frontend.image_motion import fitted_flow_px
 from gevi_cli.inertial.imu_stream import ImuStream
-from gevi_cli.inertial.standstill import GRAVITY, rest_limits_hold, tilt_from_specific_force
+from gevi_cli.inertial.standstill import (
+    GRAVITY,
+    STILL_MAX_ACC_STD,
+    STILL_MAX_GRAVITY_ERR,
+    STILL_MAX_GYRO_STD,
+    rest_limits_hold,
+    tilt_from_specific_force,
+)
 from gevi_cli.pipelines.config import (
     BA_PRIOR_SIGMA,
     INIT_STRIDE,
     MAX_WINDOW_S,
     POSE_SIGMA_M,
     STILL_LAG_S,
-    STILL_MAX_ACC_STD,
     STILL_MAX_FLOW_PX,
-    STILL_MAX_GRAVITY_ERR,
-    STILL_MAX_GYRO_STD,
     STILL_PERSIST,
     InitConfig,
 )

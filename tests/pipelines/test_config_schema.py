@@ -307,3 +307,25 @@ def test_a_batch_refuses_a_method_that_does_not_fit_an_image_sequence_at_the_doo
                  "sequences:\n  - name: kl\n    simulate: {preset: kitti-like, seed: 1, duration: 2, format: kitti}\n")
     with pytest.raises(GeviError, match="'flags' on sequences.kl: .*use_export_flags=true: does not apply to kitti"):
         check_methods_fit(load_batch_config(f))
+
+
+def test_each_number_is_defined_once():
+    """What counts as a gap and as rest, and the initialisation's bounds, come from one definition each: the
+    setting's default and domain are the constants the other commands and the odometry use."""
+    import pydantic
+
+    from gevi_cli.datasets.sequence import GAP_FACTOR
+    from gevi_cli.evaluation import imu_report
+    from gevi_cli.inertial import imu_stream, reference_alignment, standstill
+    from gevi_cli.pipelines import config as pc
+
+    assert pc.OdometryConfig().imu.max_gap_factor == GAP_FACTOR
+    assert not hasattr(imu_stream, "IMU_GAP_FACTOR") and reference_alignment.GAP_FACTOR is GAP_FACTOR
+    assert imu_report.STILL_LIMITS is standstill.STILL_LIMITS == (
+        standstill.STILL_MAX_GYRO_STD, standstill.STILL_MAX_ACC_STD, standstill.STILL_MAX_GRAVITY_ERR)
+    assert not hasattr(pc, "STILL_MAX_GYRO_STD")
+    with pytest.raises(pydantic.ValidationError):
+        pc.InitConfig(still_min_s=pc.STILL_LAG_S)
+    pc.InitConfig(window_s=pc.MAX_WINDOW_S)
+    with pytest.raises(pydantic.ValidationError):
+        pc.InitConfig(window_s=pc.MAX_WINDOW_S + 0.01)
