@@ -17,7 +17,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from gevi_cli.evaluation.evaluate import EvalSettings, PairResult
-from gevi_cli.run.pipeline import RunResult, primary_file
+from gevi_cli.run.pipeline import RunResult
 from gevi_cli.trajectory import Trajectory
 
 __all__ = ["RunResult", "run", "evaluate"]
@@ -47,8 +47,7 @@ def _run(sequence, method, config, sets, stride, start, max_frames, seed, ground
                      config_file=None if config is None else str(config), sets=tuple(sets), seed=seed, quiet=True,
                      groundtruth=None if groundtruth is None else str(groundtruth))
     resolved = resolve(req)
-    status = RunStatus(method=resolved.req.method, stride=stride, sequence=resolved.source.name,
-                       primary=primary_file(resolved))
+    status = RunStatus(method=resolved.req.method, stride=stride, sequence=resolved.source.name)
     return run_and_evaluate(resolved, status, sinks, progress=progress)
 
 

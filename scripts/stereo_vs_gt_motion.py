@@ -72,7 +72,7 @@ def main() -> None:
     resolved = resolve(RunRequest(sequence=a.sequence, method=a.method, quiet=True, groundtruth=a.gt))
     frontend, odometry = build(resolved.source, resolved.kind, resolved.cfg, a.method)
     odometry.disparity_offset = recorder = _Recorder()
-    result = run_and_evaluate(resolved, RunStatus(method=a.method), pipeline=(frontend, odometry))
+    result = run_and_evaluate(resolved, RunStatus(method=a.method), pipeline=(frontend, odometry))  # one pair: no restart
     cam, stamps = frontend.camera, resolved.source.stamps_ns
     gt = result.groundtruth
     fb = cam.fx * cam.baseline

@@ -118,6 +118,7 @@ def run_odometry(source, odometry: Odometry, status: RunStatus, sinks, *, T_B_C0
             sink.status(status)
         frames = _frames(source, start, stop)
 
+    announced = False  # the offset found without a restart was reported
     bar = tqdm(total=stop - start, unit="frame", disable=not progress, dynamic_ncols=True, leave=False)
     for sink in sinks:
         sink.status(status)
@@ -141,6 +142,12 @@ def run_odometry(source, odometry: Odometry, status: RunStatus, sinks, *, T_B_C0
             if rebuild is not None and offset is not None and offset.calls_for_restart:
                 restart_calibrated()
                 continue
+            if offset is not None and offset.found is not None and not offset.restarted and not announced:
+                est = offset.found
+                why = "past the first keyframes" if rebuild is not None else "the odometry cannot be rebuilt"
+                warn(f"stereo disparity offset {est.value_px:.2f} +- {est.total_sigma_px:.2f} px found at frame "
+                     f"{offset.found_at_frame}: applied from the next keyframe on, without a restart ({why})")
+                announced = True
             res.timings["read"] = t_read
             total = time.perf_counter() - t0 + t_read
             stamps[res.index] = res.t_ns

@@ -44,7 +44,9 @@ class RunResult:
     ``states``: GeVI's per-frame IMU state (None for CFO).  ``status``: what ``status.json`` holds.
     ``evaluation``: the primary trajectory against the sequence's ground truth, aligned by the config's
     ``run.align`` (None without a ground truth, or when it could not be evaluated); ``evaluations``: every
-    alignment evaluated (a stereo-inertial run adds posyaw), ``truth`` the ground truth read.
+    alignment evaluated (a stereo-inertial run adds posyaw), ``truth`` the ground truth read; ``tilt``:
+    GeVI's roll/pitch error against a gravity-aligned ground truth (deg; ``tilt_problem`` says why not);
+    ``warnings``: every warning of the run, as ``gevi run`` prints them.
     """
 
     method: str
@@ -63,6 +65,9 @@ class RunResult:
     truth: GroundTruth | None = None
     truth_problem: str | None = None  # why the ground truth could not be read
     evaluations: list[Evaluation] = field(default_factory=list)
+    tilt: dict | None = None  # GeVI: roll/pitch error of the primary trajectory (tilt_rmse_deg, tilt_max_deg, trend)
+    tilt_problem: str | None = None  # GeVI: why roll/pitch were not evaluated
+    warnings: list[str] = field(default_factory=list)  # every warning the run gave, the restart's included
 
 
 def primary_file(resolved) -> str:
@@ -94,30 +99,50 @@ def run_and_evaluate(resolved, status: RunStatus, sinks=(), *, pipeline=None, ru
                      progress: bool = False, warn=None) -> RunResult:
     """Run ``resolved`` (:func:`gevi_cli.run.session.resolve`) into memory and ``sinks``, then evaluate it.
 
-    ``pipeline``: its (front end, odometry), built here when None; ``run_dir``: the folder a
-    :class:`~gevi_cli.run.sinks.FolderSink` among ``sinks`` writes, whose primary trajectory is then the
-    one evaluated.  Exceptions of the odometry propagate (the sinks are closed first, the status says
-    "crashed"); an unusable ground truth or evaluation is recorded in the result instead."""
+    ``pipeline``: a factory of the run's (front end, odometry), called again for a fresh odometry when the
+    run restarts with the stereo disparity offset; or one (front end, odometry) pair, which cannot be
+    rebuilt, so an offset found on the way applies from the next keyframe on, without a restart; None: the
+    stock ones.  Each sink must have :class:`~gevi_cli.run.sinks.RunSink`'s methods (checked before the
+    first frame).  ``run_dir``: the folder a :class:`~gevi_cli.run.sinks.FolderSink` among ``sinks``
+    writes, whose primary trajectory (chosen here, ``status.primary``) is then the one evaluated.
+    Exceptions of the odometry propagate (the sinks are closed first, the status says "crashed"); an
+    unusable ground truth or evaluation is recorded in the result instead."""
     import pandas as pd
 
     from gevi_cli.run.assemble import build, make_pipeline
     from gevi_cli.run.driver import run_odometry
-    from gevi_cli.run.sinks import FRAME_COLUMNS, STAGES, MemorySink
+    from gevi_cli.run.sinks import FRAME_COLUMNS, STAGES, MemorySink, check_sink
 
-    warn = warn if warn is not None else (lambda msg: None)
-    frontend, odometry = pipeline if pipeline is not None else make_pipeline(resolved, warn=warn)
+    for sink in sinks:
+        check_sink(sink)
+    given, warnings = warn, []
+
+    def warn(msg):
+        warnings.append(msg)
+        if given is not None:
+            given(msg)
+
     source, method = resolved.source, resolved.req.method
+    if pipeline is None:
+        frontend, odometry = make_pipeline(resolved, warn=warn)
+        rebuild = lambda: build(source, resolved.kind, resolved.cfg, method, warn=lambda msg: None,  # noqa: E731
+                                start=resolved.start)[1]
+    elif callable(pipeline):
+        frontend, odometry = pipeline()
+        rebuild = lambda: pipeline()[1]  # noqa: E731
+    else:
+        (frontend, odometry), rebuild = pipeline, None
+    status.primary = primary_file(resolved)
     memory = MemorySink()
     outcome = run_odometry(source, odometry, status, [memory, *sinks], T_B_C0=np.asarray(frontend.camera.T_B_C0),
-                           start=resolved.start, stop=resolved.stop, progress=progress, warn=warn,
-                           rebuild=lambda: build(source, resolved.kind, resolved.cfg, method, warn=lambda msg: None,
-                                                  start=resolved.start)[1])
+                           start=resolved.start, stop=resolved.stop, progress=progress, warn=warn, rebuild=rebuild)
     frames = pd.DataFrame(memory.frame_rows, columns=list(FRAME_COLUMNS))
     timings = pd.DataFrame(memory.timing_rows, columns=["index", "t_ns", "total"] + list(STAGES))
     states = pd.DataFrame(memory.state_rows) if memory.state_rows else None
     est = memory.trajectory("body")
     result = RunResult(method, source.name, resolved.cfg, est, memory.trajectory("cam0"), memory.online_trajectory(),
                        frames, timings, states, outcome.status, source.groundtruth, None, outcome.exit_code)
+    result.warnings = warnings
     gt = groundtruth_source(resolved)
     if gt is not None:
         _evaluate(result, resolved, gt, memory, outcome.status.primary, run_dir)
@@ -148,8 +173,33 @@ def _evaluate(result: RunResult, resolved, gt, memory, primary: str, run_dir: Pa
             if run_dir is None and ev.result is not None:
                 ev.result.path = None  # the file was only the format's round trip
             result.evaluations.append(ev)
+        if method == "gevi":
+            result.tilt, result.tilt_problem = _tilt(result, path)
     first = result.evaluations[0]
     result.evaluation = first.result if first.error is None else None
+
+
+def _tilt(result: RunResult, path: Path) -> tuple[dict | None, str | None]:
+    """GeVI's roll/pitch error of the primary trajectory ``path`` against the run's gravity-aligned ground truth
+    (no alignment): ``({tilt_rmse_deg, tilt_max_deg, tilt_trend_deg_per_min}, None)`` or ``(None, why not)``."""
+    from gevi_cli.evaluation.tilt import tilt_errors
+    from gevi_cli.trajectory import read_trajectory
+
+    imu = result.status.imu or {}
+    if imu and not imu.get("initialised", True):
+        return None, ("the run ended before the stereo-IMU initialisation (its world is the first camera frame, "
+                      "not gravity-aligned)")
+    try:
+        te = tilt_errors(read_trajectory(path, frame="body"), result.truth.trajectory)
+    except GeviError as err:
+        return None, err.one_line()
+    if len(te.err_deg) == 0:
+        return None, None
+    # whether roll/pitch drift: the slope over every 5 s window after the initialisation (None: too short a run)
+    at_s = (imu.get("initialisation") or {}).get("at_s") or 0.0
+    trend = te.trend_deg_per_min(int(te.t_ns[0]) + int(round(at_s * 1e9)))
+    return {"tilt_rmse_deg": te.rmse_deg, "tilt_max_deg": float(te.err_deg.max()),
+            "tilt_trend_deg_per_min": trend if np.isfinite(trend) else None}, None
 
 
 def _settings(resolved, align: str) -> EvalSettings:

@@ -266,7 +266,13 @@ def _execute(req: RunRequest, echo):
     echo(f"gevi run: {req.method} on {seq_name} ({kind}), frames {req.start}..{stop - 1}{strided} -> {run_dir}")
 
     folder = FolderSink(run_dir, kitti_rows, odometry.state_columns, odometry.state_file)
-    result = run_and_evaluate(resolved, status, [folder], pipeline=(frontend, odometry), run_dir=run_dir,
+    built = [(frontend, odometry)]
+
+    def pipeline():
+        """The pair built above (its warnings printed), then fresh ones for a restart."""
+        return built.pop() if built else make_pipeline(resolved, warn=lambda msg: None)
+
+    result = run_and_evaluate(resolved, status, [folder], pipeline=pipeline, run_dir=run_dir,
                               progress=not req.quiet and sys.stderr.isatty(), warn=warn)
     st = result.status
     fps = st.frames_done / st.elapsed_s if st.elapsed_s > 0 else float("nan")
@@ -327,40 +333,22 @@ def _write_evaluation(run_dir: Path, req: RunRequest, cfg, result, seq_name: str
         else:
             status.evaluation[ev.align] = entry
     if req.method == "gevi":
-        _evaluate_tilt(run_dir, result.truth, status, echo, result.truth_problem)
+        _print_tilt(result, status, echo)
     return primary
 
 
-def _evaluate_tilt(run_dir: Path, truth, status, echo, problem: str | None = None) -> None:
-    """Roll/pitch error of the body trajectory against ``truth``, a gravity-aligned ground truth (no
-    alignment); ``problem``: why the ground truth could not be read (then ``truth`` is None)."""
-    from gevi_cli.evaluation.tilt import tilt_errors
-    from gevi_cli.trajectory import read_trajectory
-
-    if status.imu and not status.imu.get("initialised", True):
-        # its poses are in the first camera's frame, so an angle to gravity would be meaningless
-        echo("roll/pitch not evaluated: the run ended before the stereo-IMU initialisation (its world is the "
-             "first camera frame, not gravity-aligned)")
+def _print_tilt(result, status, echo) -> None:
+    """GeVI's roll/pitch error as the run path evaluated it (``RunResult.tilt``), printed and into status.json."""
+    problem = result.truth_problem or result.tilt_problem
+    if result.tilt is None:
+        if problem is not None:
+            echo(f"roll/pitch not evaluated: {problem}")
         return
-    if problem is not None:
-        echo(f"roll/pitch not evaluated: {problem}")
-        return
-    try:
-        te = tilt_errors(read_trajectory(run_dir / status.primary, frame="body"), truth.trajectory)
-    except GeviError as err:
-        echo(f"roll/pitch not evaluated: {err.one_line()}")
-        return
-    if len(te.err_deg) == 0:
-        return
-    status.evaluation["tilt_rmse_deg"] = te.rmse_deg
-    status.evaluation["tilt_max_deg"] = float(te.err_deg.max())
-    # whether roll/pitch drift: the slope over every 5 s window after the initialisation (None: too short a run)
-    at_s = ((status.imu or {}).get("initialisation") or {}).get("at_s") or 0.0
-    trend = te.trend_deg_per_min(int(te.t_ns[0]) + int(round(at_s * 1e9)))
-    status.evaluation["tilt_trend_deg_per_min"] = trend if np.isfinite(trend) else None
-    trend_txt = f", trend {trend:+.3f} deg/min over 5 s windows" if np.isfinite(trend) else ""
-    echo(f"roll/pitch error {te.rmse_deg:.3f} deg RMSE, {te.err_deg.max():.3f} deg max{trend_txt} (gravity "
-         "direction, no alignment; needs a gravity-aligned ground truth)")
+    status.evaluation.update(result.tilt)
+    trend = result.tilt["tilt_trend_deg_per_min"]
+    trend_txt = f", trend {trend:+.3f} deg/min over 5 s windows" if trend is not None else ""
+    echo(f"roll/pitch error {result.tilt['tilt_rmse_deg']:.3f} deg RMSE, {result.tilt['tilt_max_deg']:.3f} deg max"
+         f"{trend_txt} (gravity direction, no alignment; needs a gravity-aligned ground truth)")
 
 
 def _failed(why: str, echo):

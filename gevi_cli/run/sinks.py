@@ -13,6 +13,7 @@ from typing import Protocol
 
 import numpy as np
 
+from gevi_cli.errors import GeviError
 from gevi_cli.pipelines.types import FrameResult
 from gevi_cli.run.folder import PoseStream, RunStatus, write_status
 from gevi_cli.trajectory import Trajectory
@@ -37,6 +38,18 @@ class RunSink(Protocol):
     def restart(self) -> None: ...
 
     def close(self, status: RunStatus) -> None: ...
+
+
+SINK_METHODS = ("final", "online", "frame", "status", "restart", "close")
+
+
+def check_sink(sink) -> None:
+    """A sink handed to a run has every :class:`RunSink` method (a restart calls ``restart``, on data where the
+    disparity offset is found): a one-line GeviError before the first frame, not an AttributeError mid-run."""
+    missing = [m for m in SINK_METHODS if not callable(getattr(sink, m, None))]
+    if missing:
+        raise GeviError("sinks", f"{type(sink).__name__} lacks {', '.join(missing)} (a RunSink has "
+                                 f"{', '.join(SINK_METHODS)})")
 
 
 def _fmt(v) -> str:

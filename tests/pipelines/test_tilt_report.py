@@ -1,4 +1,5 @@
-"""The run's roll/pitch report (gevi run's evaluation for GeVI): RMSE, max and the trend after the initialisation."""
+"""The run's roll/pitch report (the run path's evaluation for GeVI, RunResult.tilt, printed by gevi run): RMSE,
+max and the trend after the initialisation."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,7 +8,8 @@ import pytest
 from gevi_cli.evaluation.pair import read_groundtruth
 from gevi_cli.geometry import exp_so3
 from gevi_cli.run.folder import RunStatus
-from gevi_cli.run.session import _evaluate_tilt
+from gevi_cli.run.pipeline import RunResult, _tilt
+from gevi_cli.run.session import _print_tilt
 from gevi_cli.trajectory import Trajectory
 from gevi_cli.trajectory.formats import write_trajectory
 
@@ -25,8 +27,12 @@ def _run(tmp_path, drift_deg_per_min, duration_s=60.0, init_s=2.0):
     write_trajectory(Trajectory.from_rotations(t_ns, R_gt, pos, frame="body"), tmp_path / "gt.tum", "tum")
     write_trajectory(Trajectory.from_rotations(t_ns, R_est, pos, frame="body"), tmp_path / "traj_body.tum", "tum")
     st = RunStatus(primary="traj_body.tum", imu={"initialised": True, "initialisation": {"at_s": init_s}})
+    result = RunResult("gevi", "s", None, None, None, None, None, None, None, st, None, None,
+                       truth=read_groundtruth(tmp_path / "gt.tum"))
+    result.tilt, result.tilt_problem = _tilt(result, tmp_path / "traj_body.tum")
     lines = []
-    _evaluate_tilt(tmp_path, read_groundtruth(tmp_path / "gt.tum"), st, lambda *a, **k: lines.append(" ".join(map(str, a))))
+    _print_tilt(result, st, lambda *a, **k: lines.append(" ".join(map(str, a))))
+    assert st.evaluation == result.tilt  # the command only prints and records what the run path computed
     return st.evaluation, lines
 
 

@@ -139,3 +139,60 @@ def test_a_gevi_run_restarts_with_its_imu_and_writes_each_frame_once(pool_render
     for name in ("traj_body.tum", "traj_online_body.tum"):
         rows = [r for r in (out / name).read_text().splitlines() if r and not r.startswith("#")]
         assert len(rows) == n
+
+
+def test_the_run_path_checks_sinks_and_keeps_warnings_and_a_given_pair_is_never_swapped(pool_render):
+    """api-level contract (issue 50): a sink without restart() is refused before the first frame; an
+    odometry given as one pair is not replaced at a restart (an offset found applies from the next
+    keyframe); a factory is called again for the restart; every warning is in RunResult.warnings."""
+    import pytest
+
+    from gevi_cli.errors import GeviError
+    from gevi_cli.run.assemble import make_pipeline
+    from gevi_cli.run.pipeline import run_and_evaluate
+    from gevi_cli.run.session import RunRequest, resolve
+
+    class NoRestart:
+        """A sink written before restarts existed."""
+
+        def final(self, *a): ...
+        def online(self, *a): ...
+        def frame(self, *a): ...
+        def status(self, *a): ...
+        def close(self, *a): ...
+
+    resolved = resolve(RunRequest(sequence=str(pool_render), method="cfo", quiet=True, max_frames=8))
+    with pytest.raises(GeviError, match="NoRestart lacks restart"):
+        run_and_evaluate(resolved, RunStatus(), [NoRestart()])
+
+    def forced(odometry):
+        """The odometry's self-calibration finds 0.3 px at its 3rd frame (the render's own never counts)."""
+        real = odometry.track
+
+        def track(frame):
+            res = real(frame)
+            if res.index == 2 and odometry.disparity_offset.found is None and not odometry.disparity_offset.restarted:
+                for k in range(mod.MIN_KEYFRAMES):
+                    odometry.disparity_offset.add(Step(2, 100 + k, 0.3, 0.05))
+            return res
+        odometry.track = track
+        return odometry
+
+    frontend, odometry = make_pipeline(resolved)
+    pair = (frontend, forced(odometry))
+    result = run_and_evaluate(resolved, RunStatus(), pipeline=pair)
+    rec = result.status.disparity_offset
+    assert not rec["restarted"] and rec["applied_px"] == 0.3 and result.status.first_pass == {}
+    assert any("applied from the next keyframe on, without a restart" in w for w in result.warnings)
+    assert result.status.primary == "traj_body.tum"
+
+    calls = []
+
+    def factory():
+        calls.append(1)
+        fe, od = make_pipeline(resolved)
+        return fe, (forced(od) if len(calls) == 1 else od)
+
+    result = run_and_evaluate(resolved, RunStatus(), pipeline=factory)
+    assert len(calls) == 2 and result.status.disparity_offset["restarted"]
+    assert any("restarting from the first frame" in w for w in result.warnings)
