@@ -6,7 +6,9 @@ Results tree (``-o OUT``)::
     OUT/report/                              the report (see gevi_cli.batch.report)
 
 ``<method>/<sequence>/`` is the layout ``gevi eval --results OUT/runs`` reads.  Trial ``k`` (1-based)
-runs with ``--seed k``; a ``seed_per_trial`` simulated sequence is also rendered with seed ``k``.
+runs with ``--seed k``; a ``seed_per_trial`` simulated sequence is also rendered with seed ``k``.  CFO
+takes no seed (OpenCV's 5-point RANSAC keeps its own): it runs once per sequence, whatever ``trials``
+says, except on a ``seed_per_trial`` render, whose trials are different renders (:func:`deterministic`).
 """
 from __future__ import annotations
 
@@ -27,7 +29,7 @@ class RunSpec:
     method_id: str
     sequence: str
     trial: int
-    seed: int
+    seed: int | None  # None: the method takes no seed (CFO)
     run_dir: str
     params: tuple  # (RunRequest field, value) of the method
     sim: SimSpec | None = None  # the render this run reads (resolved to ``source`` before dispatch)
@@ -51,6 +53,16 @@ def sim_for_trial(seq: SequenceEntry, trial: int) -> SimSpec | None:
     return dataclasses.replace(seq.sim, seed=trial) if seq.seed_per_trial else seq.sim
 
 
+def deterministic(method: str) -> bool:
+    """The method's runs on one input are identical to the byte: CFO (no seed), not GeVI (its 3-point RANSAC)."""
+    return method == "cfo"
+
+
+def trials_run(m, seq: SequenceEntry) -> int:
+    """How many of method entry ``m``'s trials run on ``seq``: one for a deterministic method on one input."""
+    return 1 if deterministic(m.method) and not seq.seed_per_trial else m.trials
+
+
 def expand(cfg: BatchConfig, out: Path) -> list[RunSpec]:
     """Every run of the batch, in a stable order (sequence, method, trial); skipped sequences left out."""
     runs = []
@@ -60,9 +72,10 @@ def expand(cfg: BatchConfig, out: Path) -> list[RunSpec]:
         for m in cfg.methods:
             if seq.methods is not None and m.name not in seq.methods:
                 continue
-            for k in range(1, m.trials + 1):
+            for k in range(1, trials_run(m, seq) + 1):
                 rid = f"{m.ident}/{seq.name}/trial{k}"
-                runs.append(RunSpec(run_id=rid, method=m.name, method_id=m.ident, sequence=seq.name, trial=k, seed=k,
+                seed = None if deterministic(m.method) else k
+                runs.append(RunSpec(run_id=rid, method=m.name, method_id=m.ident, sequence=seq.name, trial=k, seed=seed,
                                     run_dir=str(Path(out) / "runs" / rid), params=m.params, sim=sim_for_trial(seq, k),
                                     source=seq.path, inputs=seq.inputs))
     return runs

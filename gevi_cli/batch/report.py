@@ -21,6 +21,7 @@ import re
 import time
 from pathlib import Path
 
+from gevi_cli.batch.plan import deterministic
 from gevi_cli.evaluation.tables import Cell, Table, render_markdown
 
 #: timing.csv columns of the runtime table (ms per frame), in pipeline order
@@ -211,6 +212,10 @@ def _markdown(cfg, specs, baselines, res, se3, posyaw, online, runtime, skipped,
     L = [f"# gevi batch: {cfg.name}", "", intro + (f" Command: `{command}`." if command else ""), "", rules, ""]
     L += ["## Settings", "", "| method | `gevi run` options | trials |", "|---|---|---|"]
     L += [f"| {m.name} | `{' '.join(m.args)}` | {m.trials} |" for m in cfg.methods]
+    once = [m.name for m in cfg.methods if m.trials > 1 and deterministic(m.method)]
+    if once:
+        L += ["", f"{', '.join(once)}: deterministic (CFO takes no seed; OpenCV's 5-point RANSAC keeps its own), so "
+                  "it ran once per sequence, not once per trial, except on `seed_per_trial` renders."]
     L += ["", "| sequence | source | methods |", "|---|---|---|"]
     for s in cfg.sequences:
         if s.sim is not None:

@@ -15,7 +15,7 @@ from gevi_cli.run.method_options import method_options
 @click.option("--stride", type=click.IntRange(min=1), default=1, show_default=True, metavar="K",
               help="Use every K-th frame (frame j = original frame K*j, its stamp kept; --start and --max-frames "
                    "count strided frames); the IMU and the ground truth stay whole. Not for track exports.")
-@click.option("--seed", type=int, default=None, help="Seed of GeVI's 3-point RANSAC (= --set run.seed=...); OpenCV's 5-point RANSAC (CFO) has its own fixed seed.")
+@click.option("--seed", type=int, default=None, help="Seed of GeVI's 3-point RANSAC (= --set run.seed=...); GeVI only: OpenCV's 5-point RANSAC (CFO) has its own fixed seed.")
 @click.option("-o", "--out", default=None, type=click.Path(file_okay=False),
               help="Run folder (default results/<method>/<sequence>/<timestamp>/).")
 @click.option("--results-root", default="results", show_default=True, type=click.Path(file_okay=False),

@@ -220,8 +220,9 @@ ACC_ORDER = 0  # degree of the acceleration's position fit: 0 chooses 2 or 3 per
 class RunConfig:
     """Run-level settings."""
 
-    seed: Int = setting(0, "seed of GeVI's 3-point RANSAC: frame k draws from (seed, k), so a run is reproducible (CFO's "
-                       "OpenCV 5-point RANSAC has its own fixed seed)", ge=0)
+    seed: Int = setting(0, "seed of GeVI's 3-point RANSAC: frame k draws from (seed, k), so a run is reproducible",
+                        ge=0, applies=Applies(methods=("gevi",), why="CFO's OpenCV 5-point RANSAC keeps its own "
+                                                                     "fixed seed: its runs are identical to the byte"))
     align: Literal["se3", "sim3", "posyaw", "origin", "none"] = setting("se3", "alignment of the run's evaluation (se3 for stereo)")
     rpe_delta: Float = setting(1.0, "RPE delta in frames", gt=0)
 

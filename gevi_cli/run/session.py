@@ -168,12 +168,15 @@ def dump_config(req: RunRequest) -> str:
     """Every setting: its effective value, then its type, default, valid domain and help."""
     from gevi_cli.config import describe, show
 
-    kind, method = None, req.method or "cfo"
     if req.sequence is not None:
         source, kind = open_input(req)
         method, _ = choose_method(req, source)
+        what = method
+    else:  # what `gevi run` without a SEQUENCE runs: the built-in pool sample (stereo-IMU), not rendered here
+        kind, method = "pool", req.method or "gevi"
+        what = f"{method} on the built-in pool-easy sample (gevi run without a SEQUENCE)"
     cfg, sources = resolve_config(req, kind, method)
-    lines = [f"# effective configuration for {method} ({' -> '.join(sources)}); set any key with --set KEY=VALUE",
+    lines = [f"# effective configuration for {what} ({' -> '.join(sources)}); set any key with --set KEY=VALUE",
              "# KEY=VALUE    # type in its domain (default DEFAULT) [where it applies]: what it does"]
     for key, value, typ, default, dom, help_text in describe(cfg):
         lines.append(f"{key}={show(value)}    # {typ} in {dom} (default {show(default)}) {help_text}")

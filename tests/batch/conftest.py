@@ -1,5 +1,5 @@
 """One small batch shared by every batch test (session scope): a 5 s pool-easy render (10 Hz,
-376x240; rendered once into a test cache), GeVI and CFO, two trials each, run with ``--jobs 2``; the
+376x240; rendered once into a test cache), GeVI (two trials) and CFO (deterministic: one run), with ``--jobs 2``; the
 online trajectories evaluated too."""
 from __future__ import annotations
 

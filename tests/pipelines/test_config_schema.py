@@ -110,8 +110,9 @@ def test_a_crossed_pair_is_one_line(lo, hi, strict, capsys):
 
 
 @pytest.mark.parametrize("args, line", [
+    # without a SEQUENCE, the configuration of what `gevi run` then runs: the pool sample (pool.yaml: 10 m)
     (["--set", "triangulation.min_depth_m=200"],
-     "--set: triangulation.min_depth_m=200.0 must be below triangulation.max_depth_m (100.0)"),
+     "--set: triangulation.min_depth_m=200.0 must be below triangulation.max_depth_m (10.0)"),
     (["--set", "keyframe.min_tracked_ratio=-3"], "--set: keyframe.min_tracked_ratio=-3.0: expected float in [0, 1]"),
     # a bad front-end value: one line, not the whole dataclass
     (["--set", "frontend.lk_window=4"], "--set: frontend.lk_window=4: expected odd int in [3, inf)"),
@@ -166,6 +167,8 @@ CFO_REFUSED = [
     (["--no-adaptive"], "--no-adaptive: does not apply to cfo (GeVI only: the gravity fusion"),
     (["--imu-time-offset", "0.01"], "--imu-time-offset: does not apply to cfo (GeVI only: the IMU settings"),
     (["--set", "verify.ransac=3pt"], "--set: verify.ransac=3pt: does not apply to cfo (3pt is GeVI's"),
+    (["--seed", "3"], "--seed: does not apply to cfo (CFO's OpenCV 5-point RANSAC keeps its own fixed seed"),
+    (["--set", "run.seed=2"], "--set: run.seed=2: does not apply to cfo (CFO's OpenCV 5-point RANSAC"),
     (["--set", "fusion.mode=4dof"], "--set: fusion.mode=4dof: does not apply to cfo (GeVI only"),
     (["--set", "fusion.adaptive=false"], "--set: fusion.adaptive=false: does not apply to cfo (GeVI only"),
     (["--set", "init.window_s=3"], "--set: init.window_s=3.0: does not apply to cfo (GeVI only: the initialisation"),
@@ -329,3 +332,12 @@ def test_each_number_is_defined_once():
     pc.InitConfig(window_s=pc.MAX_WINDOW_S)
     with pytest.raises(pydantic.ValidationError):
         pc.InitConfig(window_s=pc.MAX_WINDOW_S + 0.01)
+
+
+def test_dump_config_without_a_sequence_is_the_run_without_one(capsys):
+    """`gevi run` without a SEQUENCE runs GeVI on the pool sample with pool.yaml: --dump-config says that."""
+    code, out, _ = run_cli(["run", "--dump-config"], capsys)
+    assert code == 0 and out.startswith("# effective configuration for gevi on the built-in pool-easy sample")
+    assert "gevi_cli/configs/pool.yaml" in out.splitlines()[0]
+    lines = {line.split("=", 1)[0]: line for line in out.splitlines() if not line.startswith("#")}
+    assert lines["verify.ransac"].startswith("verify.ransac=3pt")  # GeVI's, as the run would use
