@@ -254,6 +254,12 @@ class EurocSequence(Sequence):
             return gt
         return self._fallback_groundtruth()
 
+    @property
+    def reference_in_imu_frame(self) -> str:
+        """EuRoC's ground truth (and a render's, and a pool sequence's converted motion capture) is the pose of
+        the body frame, which is the IMU's; a file given with --gt may be anything."""
+        return "" if self._gt_override is not None else "the dataset's ground truth is the body (IMU) frame's pose"
+
     def _groundtruth_beside(self) -> Path | None:
         """The one body-pose file in a ``groundtruth/`` folder next to ``mav0/`` (TUM or EuRoC CSV), as copies
         of EuRoC sequences often carry it; None when there is none or several (a warning names them)."""

@@ -33,6 +33,11 @@ class EurocImu:
     def imu(self):
         return read_imu(self.mav0 / "imu0")
 
+    @property
+    def reference_in_imu_frame(self) -> str:
+        """The ground truth of an IMU-only EuRoC folder (gevi simulate mav) is the body (IMU) frame's pose."""
+        return "" if self._gt is not None else "the dataset's ground truth is the body (IMU) frame's pose"
+
     @cached_property
     def groundtruth(self):
         csv = self._gt or self.mav0 / "state_groundtruth_estimate0" / "data.csv"

@@ -123,6 +123,12 @@ class Sequence(abc.ABC):
         return None
 
     @property
+    def reference_in_imu_frame(self) -> str:
+        """Why the dataset's ground truth is the IMU's own pose (``gevi imu`` then estimates only its clock
+        offset); "" when that is not known (a file given with --gt, a motion-capture marker body)."""
+        return ""
+
+    @property
     def groundtruth_source(self) -> Path | None:
         """The file :attr:`groundtruth` was read from (None: none, or not from one file)."""
         return getattr(self, "_groundtruth_source", None)

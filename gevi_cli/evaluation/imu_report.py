@@ -139,13 +139,16 @@ def _standstills(stream: ImuStream) -> list[tuple[int, int]]:
 
 
 def imu_report(stream: ImuStream, gt=None, cfg: VelocityAidedConfig = VelocityAidedConfig(), *, align: bool = True,
-               scored_t_ns=None) -> ImuReport:
+               scored_t_ns=None, align_gyro=None, in_imu_frame: str = "") -> ImuReport:
     """The whole report for ``stream``; ``gt`` an optional gravity-aligned Trajectory of the reference body
     (mocap markers, or the IMU itself).  The attitude is
     :class:`~gevi_cli.inertial.velocity_aided.VelocityAidedFilter`'s; with ground truth, the gravity-prior
     filter of :mod:`.attitude` (adaptive and fixed weight), gyro-only, complementary and VQF rows are
     compared on the reference aligned to the IMU (``align``; see the module docstring), over the stamps
-    ``scored_t_ns`` (ns on the IMU clock) when given."""
+    ``scored_t_ns`` (ns on the IMU clock) when given.  ``align_gyro``: ``(stamps ns, gyro rad/s)`` at the
+    IMU's full rate for the alignment (default: the stream's, which may be strided); ``in_imu_frame``: why
+    the reference is known to be in the IMU frame already (then only its clock offset is estimated; "": a
+    rotation is estimated too)."""
     t, g, a = stream.t_ns, stream.gyro, stream.acc
     t0 = int(t[0])
     dt = np.diff(t)
@@ -188,8 +191,9 @@ def imu_report(stream: ImuStream, gt=None, cfg: VelocityAidedConfig = VelocityAi
                                                     offline=True)
     if gt is not None:
         if align:
-            rep.alignment = estimate_alignment(t, g - b_g, gt)
-            rep.reference_note = (rep.alignment.describe() if rep.alignment is not None else
+            t_al, g_al = align_gyro if align_gyro is not None else (t, g)
+            rep.alignment = estimate_alignment(t_al, np.asarray(g_al) - b_g, gt, rotation=not in_imu_frame)
+            rep.reference_note = (rep.alignment.describe(in_imu_frame) if rep.alignment is not None else
                                   "reference NOT aligned: too little rotation to estimate a clock offset")
         else:
             rep.reference_note = "reference used as given (--no-align, or aligned to the IMU by the dataset)"

@@ -57,11 +57,14 @@ class ReferenceAlignment:
         q = np.roll(Rotation.from_matrix(R).as_quat(), 1, axis=1)
         return replace(gt, t_ns=gt.t_ns + int(round(self.offset_s * 1e9)), quat_wxyz=q)
 
-    def describe(self) -> str:
+    def describe(self, why_no_rotation: str = "") -> str:
+        """One line; ``why_no_rotation``: the reason no rotation was estimated (then ``R_IR`` = I)."""
         rv = Rotation.from_matrix(self.R_IR).as_rotvec()
+        rot = (f"no IMU-from-reference rotation ({why_no_rotation})" if why_no_rotation else
+               f"IMU-from-reference rotation {self.angle_deg:.2f} deg (rotation vector [{rv[0]:+.4f} {rv[1]:+.4f} "
+               f"{rv[2]:+.4f}] rad)")
         return (f"reference aligned to the IMU from the angular rates: clock offset {self.offset_s * 1e3:+.1f} ms "
-                f"(reference stamps + offset = IMU time), IMU-from-reference rotation {self.angle_deg:.2f} deg "
-                f"(rotation vector [{rv[0]:+.4f} {rv[1]:+.4f} {rv[2]:+.4f}] rad); |rate| correlation "
+                f"(reference stamps + offset = IMU time), {rot}; |rate| correlation "
                 f"{self.correlation:.3f}, rate residual {self.rate_residual:.3g} rad/s over {self.n} intervals")
 
 
@@ -86,10 +89,11 @@ def _mean_gyro(G_t: np.ndarray, G: np.ndarray, a_s: np.ndarray, b_s: np.ndarray)
     return (gb - ga) / (b_s - a_s)[:, None]
 
 
-def estimate_alignment(imu_t_ns, gyro, gt, max_offset_s: float = 0.5) -> ReferenceAlignment | None:
+def estimate_alignment(imu_t_ns, gyro, gt, max_offset_s: float = 0.5, rotation: bool = True) -> ReferenceAlignment | None:
     """Clock offset and ``R_IR`` of the reference ``gt`` (Trajectory of mocap poses) against the gyro
-    (IMU stamps ns, (n, 3) rad/s); None when fewer than 20 rate intervals overlap or the motion is too
-    small to show a rate (|w_R| spread below 0.02 rad/s)."""
+    (IMU stamps ns, (n, 3) rad/s); ``rotation`` False: the reference is in the IMU frame already, only the
+    clock offset is estimated (``R_IR`` = I).  None when fewer than 20 rate intervals overlap or the
+    motion is too small to show a rate (|w_R| spread below 0.02 rad/s)."""
     t_i = np.asarray(imu_t_ns, dtype=np.int64)
     g = np.asarray(gyro, dtype=float)
     origin = int(t_i[0])
@@ -120,8 +124,11 @@ def estimate_alignment(imu_t_ns, gyro, gt, max_offset_s: float = 0.5) -> Referen
     inside = (a_s + offset >= t_s[0]) & (b_s + offset <= t_s[-1])
     w_I = _mean_gyro(t_s, G, a_s[inside] + offset, b_s[inside] + offset)
     w_Rin = w_R[inside]
-    rot, _ = Rotation.align_vectors(w_I - w_I.mean(0), w_Rin - w_Rin.mean(0))
-    R_IR = rot.as_matrix()
+    if rotation:
+        rot, _ = Rotation.align_vectors(w_I - w_I.mean(0), w_Rin - w_Rin.mean(0))
+        R_IR = rot.as_matrix()
+    else:
+        R_IR = np.eye(3)
     res = (w_I - w_I.mean(0)) - (w_Rin - w_Rin.mean(0)) @ R_IR.T
     return ReferenceAlignment(offset, R_IR, float(max(scores)), float(np.sqrt(np.mean(np.sum(res**2, axis=1)))),
                               int(inside.sum()))

@@ -9,9 +9,11 @@ from gevi_cli.errors import GeviError
 
 
 def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind, groundtruth, calib, imu_calib, topics,
-                   cameras, imu_stride: int = 1, align: bool = True, echo=print) -> Path:
+                   cameras, imu_stride: int = 1, align: bool = True, align_rotation: bool = False, echo=print) -> Path:
     """`gevi imu`: ``align`` False (``--no-align``) scores on the ground truth as given; a BROAD trial's
-    reference is aligned by its authors and is never re-aligned."""
+    reference is aligned by its authors and is never re-aligned.  A reference the dataset states to be in
+    the IMU frame gets a clock offset only, unless ``align_rotation`` (``--align-rotation``); the
+    alignment always reads the full-rate gyro, whatever ``imu_stride``."""
     from gevi_cli.datasets import open_sequence
     from gevi_cli.datasets.registry import sequence_kwargs
     from gevi_cli.evaluation.imu_report import imu_report
@@ -48,6 +50,7 @@ def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind,
     if imu is None or len(imu) < 2:
         raise GeviError(path, "has no IMU data" if imu is None else "has fewer than 2 IMU samples")
     offset = imu_time_offset if imu_time_offset is not None else float(seq.imu_time_offset_s)
+    full = ImuStream.from_sequence(imu, offset, f"{path} (IMU)") if imu_stride > 1 else None
     if imu_stride > 1:
         imu = strided_imu(imu, imu_stride)
     stream = ImuStream.from_sequence(imu, offset, f"{path} (IMU)")  # the report says which noise model it used
@@ -58,7 +61,9 @@ def run_imu_report(sequence, *, out, results_root, imu_time_offset, plots, kind,
     scored = getattr(seq, "scored_t_ns", None)  # BROAD: the movement samples
     if scored is not None and imu_stride > 1:
         scored = scored[np.isin(scored, stream.t_ns)]
-    rep = imu_report(stream, gt, align=align and not getattr(seq, "reference_aligned", False), scored_t_ns=scored)
+    in_imu = "" if align_rotation else getattr(seq, "reference_in_imu_frame", "")
+    rep = imu_report(stream, gt, align=align and not getattr(seq, "reference_aligned", False), scored_t_ns=scored,
+                     align_gyro=(full.t_ns, full.gyro) if full is not None else None, in_imu_frame=in_imu)
     if stream.noise_missing:
         warn(f"{path} (IMU): {rep.noise_note}")
     run_dir = make_run_dir(out, Path(results_root), "imu", seq.name + (f"_stride{imu_stride}" if imu_stride > 1 else ""))

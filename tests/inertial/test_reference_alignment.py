@@ -70,3 +70,30 @@ def test_no_rotation_no_alignment():
     gyro = np.random.default_rng(0).normal(0, 1e-3, (2000, 3))
     ref = Trajectory.from_rotations(t[::2], np.tile(np.eye(3), (1000, 1, 1)), np.zeros((1000, 3)), frame="body")
     assert estimate_alignment(t, gyro, ref) is None
+
+
+def test_a_reference_in_the_imu_frame_gets_a_clock_offset_only(render):
+    """rotation=False (the dataset states its ground truth in the IMU frame): R_IR is I and the clock offset
+    is still recovered; describe() says why no rotation was estimated."""
+    s, gt = render
+    got = estimate_alignment(s.t_ns, s.gyro, _marker_reference(s, gt, 0.021, np.eye(3)), rotation=False)
+    base = estimate_alignment(s.t_ns, s.gyro, _marker_reference(s, gt, 0.0, np.eye(3)), rotation=False)
+    assert np.array_equal(got.R_IR, np.eye(3)) and got.angle_deg == 0.0
+    assert got.offset_s - base.offset_s == pytest.approx(0.021, abs=5e-4)
+    assert "no IMU-from-reference rotation (stated)" in got.describe("stated")
+
+
+def test_gevi_imu_on_a_render_estimates_no_rotation_unless_asked(tmp_path, capsys):
+    """A render's ground truth is the body (IMU) frame's pose, as EuRoC's: `gevi imu` estimates its clock offset
+    only and says why; --align-rotation estimates a rotation too."""
+    from support import run_cli
+
+    code, out, err = run_cli(["simulate", "pool-easy", tmp_path / "r", "--imu-only", "--duration", "12", "--seed", "3"],
+                             capsys)
+    assert code == 0, err
+    code, out, err = run_cli(["imu", tmp_path / "r", "-o", tmp_path / "a", "--no-plots"], capsys)
+    assert code == 0, err
+    assert "no IMU-from-reference rotation (the dataset's ground truth is the body (IMU) frame's pose)" in out
+    code, out, err = run_cli(["imu", tmp_path / "r", "-o", tmp_path / "b", "--no-plots", "--align-rotation"], capsys)
+    assert code == 0, err
+    assert "IMU-from-reference rotation " in out and "no IMU-from-reference rotation" not in out
