@@ -286,6 +286,11 @@ def _execute(req: RunRequest, echo):
              "(status.json first_pass); traj_online_body.tum is not causal after the restart")
     if st.disparity_offset:
         echo(f"stereo disparity offset: {describe_offset(st.disparity_offset)}")
+        # what ran beyond the configuration: the offset the self-calibration applied (status.json has its evidence)
+        rec = st.disparity_offset
+        config_doc["self_calibration"] = {"disparity_offset_px": rec["applied_px"],
+                                          "applied_from_frame": rec["applied_from_frame"], "restarted": rec["restarted"]}
+        (run_dir / "config.yaml").write_text(yaml.safe_dump(config_doc, sort_keys=False))
     t0_s = int(source.stamps_ns[req.start]) * 1e-9
     for iv in st.lost_intervals[:5]:
         echo(f"tracking lost at {iv['start_s'] - t0_s:.3f} s (frame {iv['first_index']}, {iv['frames']} frame(s) bridged): "

@@ -8,6 +8,7 @@ not tell it from zero, and EuRoC MH_01's steps read about 0: neither restarts, a
 import json
 
 import pytest
+import yaml
 
 from gevi_cli.api import run
 from gevi_cli.pipelines.disparity_offset import EVIDENCE_SIGMAS, SYSTEMATIC_PX
@@ -40,6 +41,9 @@ def test_kitti01_head_every_third_frame_restarted_with_the_offset(tmp_path, caps
     assert "restarting from the first frame" in err and "first pass of" in stdout
     status = json.loads((out / "status.json").read_text())
     assert status["first_pass"]["frames"] >= 5 and status["disparity_offset"]["applied_px"] > 0.4
+    calib = yaml.safe_load((out / "config.yaml").read_text())["self_calibration"]
+    assert calib == {"disparity_offset_px": status["disparity_offset"]["applied_px"], "applied_from_frame": 0,
+                     "restarted": True}
     assert status["frames_done"] == status["frames_tracked"] == 17
     assert len((out / "traj_cam0_kitti.txt").read_text().splitlines()) == 17
     result = json.loads((out / "eval" / "metrics.json").read_text())["results"][0]
