@@ -125,6 +125,22 @@ def write_eval_folder(out_dir: Path, tables, results, gts: dict, settings: EvalS
             plot_summary(pdir, ate)
 
 
+def _departure(path: Path) -> str:
+    """What the gevi run that wrote ``path`` did beyond the published method, from its status.json ("": nothing,
+    or not a gevi run folder)."""
+    import json
+
+    try:
+        rec = json.loads((path.parent / "status.json").read_text()).get("disparity_offset") or {}
+    except (OSError, ValueError, AttributeError):
+        return ""
+    if not rec.get("applied_px"):
+        return ""
+    how = "the run restarted with it" if rec.get("restarted") else f"from frame {rec.get('applied_from_frame')}"
+    return (f"beyond the published method: a stereo disparity offset of {rec['applied_px']:+.3f} px was applied "
+            f"({how}; {path.parent / 'status.json'})")
+
+
 def run_eval(*, gt_opts, estimates, results_root, gt_root, sequence_name, align, n_align, max_diff, t_offset,
              rpe_delta, rpe_unit, min_coverage, est_frame, gt_frame, t_b_c0, kitti, plots, out, overwrite,
              keep_going, quiet, only_methods=(), echo=print, allow_jumps=False):
@@ -170,6 +186,9 @@ def run_eval(*, gt_opts, estimates, results_root, gt_root, sequence_name, align,
             if not r.ok:
                 line += f"; FAILED: {r.reason}"
             echo(line)
+            departure = _departure(Path(sp.path))
+            if departure:
+                echo(f"{label}: {departure}")
     # combinations absent from a results tree
     have = {(r.method, r.sequence) for r in results}
     for m in methods:

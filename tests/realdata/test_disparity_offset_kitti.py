@@ -44,6 +44,10 @@ def test_kitti01_head_every_third_frame_restarted_with_the_offset(tmp_path, caps
     calib = yaml.safe_load((out / "config.yaml").read_text())["self_calibration"]
     assert calib == {"disparity_offset_px": status["disparity_offset"]["applied_px"], "applied_from_frame": 0,
                      "restarted": True}
+    code, stdout, err = run_cli(["eval", "--gt", shared_path("kitti01_head", "dataset", "sequences", "01"), "-e",
+                                 f"cfo={out / 'traj_body.tum'}", "-o", tmp_path / "eval"], capsys)
+    assert code == 0, err
+    assert "beyond the published method: a stereo disparity offset of" in stdout  # gevi eval says what ran
     assert status["frames_done"] == status["frames_tracked"] == 17
     assert len((out / "traj_cam0_kitti.txt").read_text().splitlines()) == 17
     result = json.loads((out / "eval" / "metrics.json").read_text())["results"][0]
