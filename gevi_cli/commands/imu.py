@@ -38,8 +38,9 @@ def command(sequence, out, results_root, imu_time_offset, no_plots, imu_stride, 
     be an IMU-only EuRoC folder (mav0/imu0 and ground truth, no cameras: `gevi simulate mav`) or a BROAD
     trial .mat (scored as the benchmark does: inclination over the movement samples).
 
-    Writes imu_states.csv, attitude.tum (orientation of the body in a gravity-aligned frame, zero
-    position), report.md and plots.
+    Writes imu_states.csv (the velocity-aided filter's states), attitude.tum (orientation of the body in a
+    gravity-aligned frame, zero position: the standstill-compensated VQF online, causal), attitude_offline.tum,
+    report.md and plots.
 
     \b
     Example:

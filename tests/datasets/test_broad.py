@@ -101,3 +101,30 @@ def test_trial_02_reproduces_vqf_figures(tmp_path, capsys):
     offline = next(v for k, v in rows.items() if k.startswith("VQF 6D offline"))
     assert online == pytest.approx(0.429, abs=0.002) and offline == pytest.approx(0.312, abs=0.002)
     assert "285.7 Hz" in out and "reference used as given" in out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("trial", ["02_undisturbed_slow_rotation_B.mat", "07_undisturbed_fast_rotation_B.mat"])
+def test_attitude_files_score_as_their_rows_on_broads_stamps(tmp_path, capsys, trial):
+    """attitude.tum and attitude_offline.tum, scored independently against BROAD's own reference at BROAD's
+    stamps over its movement samples (its inclination metric), give the report's rows for the same filters:
+    one stamp convention for every file and row."""
+    from gevi_cli.datasets.broad import BroadTrial
+    from gevi_cli.evaluation.tilt import gravity_angle_deg
+    from gevi_cli.trajectory import read_trajectory
+
+    f = shared_path("broad", "data_mat", trial)
+    code, out, err = run_cli(["imu", f, "-o", tmp_path / "imu", "--no-plots"], capsys)
+    assert code == 0, err
+    rows = {c[1].strip(): float(c[2]) for c in (line.split("|") for line in out.splitlines())
+            if len(c) > 5 and re.fullmatch(r" [0-9.]+ ", c[2])}
+    ref = BroadTrial(f)
+    gt = ref.groundtruth
+    for name, row in (("attitude.tum", "standstill-compensated VQF online (gevi imu attitude.tum), causal"),
+                      ("attitude_offline.tum", "standstill-compensated VQF offline (gevi imu attitude_offline.tum), "
+                                               "offline")):
+        est = read_trajectory(tmp_path / "imu" / name, frame="body")
+        common, i_est, i_gt = np.intersect1d(est.t_ns, gt.t_ns, return_indices=True)
+        moving = np.isin(common, ref.scored_t_ns)
+        err_deg = gravity_angle_deg(est.rotations[i_est][moving], gt.rotations[i_gt][moving])
+        assert float(np.sqrt(np.mean(err_deg**2))) == pytest.approx(rows[row], abs=0.0015), name
