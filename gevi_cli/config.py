@@ -88,7 +88,6 @@ class Applies:
     values: dict | None = None
     requires: tuple | None = None  # (dotted key, the values of it under which this setting is read)
     why: str = ""
-    requires_why: str = ""  # why, for ``requires`` (default: ``why``)
 
 
 def ordered(self):
@@ -183,10 +182,11 @@ def domain(cls, name: str) -> str:
     return f"{'(' if lo_open else '['}{lo}, {hi}{')' if hi_open else ']'}"
 
 
-def applies(cls, name: str) -> Applies | None:
-    """The setting's own :class:`Applies`, else its stage's (``APPLIES``), else None (everywhere)."""
+def applies(cls, name: str) -> list[Applies]:
+    """Where the setting does something: its stage's :class:`Applies` (``APPLIES``), then its own; both hold
+    ([]: everywhere)."""
     extra = fields(cls)[name].json_schema_extra or {}
-    return extra.get("applies") or getattr(cls, "APPLIES", None)
+    return [r for r in (getattr(cls, "APPLIES", None), extra.get("applies")) if r is not None]
 
 
 def leaves(cfg_cls, prefix: str = "") -> list[tuple[str, type, str]]:
@@ -276,24 +276,22 @@ def refuse_inapplicable(cfg, default, method: str | None, kind: str | None, wher
     default: ``default``)."""
     own = default if own is None else own
     for key, cls, name in leaves(type(cfg)):
-        rule = applies(cls, name)
-        if rule is None:
-            continue
         value = get(cfg, key)
-        if rule.requires is not None and value != get(own, key):
-            other, values = rule.requires
-            if get(cfg, other) not in values:
-                raise GeviError(where, f"{key}={show(value)} does nothing with {other}={show(get(cfg, other))} "
-                                       f"({rule.requires_why or rule.why})")
         pre = "" if flag else f"{key}={show(value)}: "
-        if rule.values and method in rule.values and value not in rule.values[method]:
-            raise GeviError(where, f"{pre}does not apply to {method} ({rule.why})")
-        if value == get(default, key):
-            continue
-        if method is not None and rule.methods is not None and method not in rule.methods:
-            raise GeviError(where, f"{pre}does not apply to {method} ({rule.why})")
-        if kind is not None and rule.inputs is not None and (kind in TRACK_KINDS) != (rule.inputs == "tracks"):
-            raise GeviError(where, f"{pre}does not apply to {kind} sequences ({rule.why})")
+        for rule in applies(cls, name):
+            if rule.values and method in rule.values and value not in rule.values[method]:
+                raise GeviError(where, f"{pre}does not apply to {method} ({rule.why})")
+            if rule.requires is not None and value != get(own, key):
+                other, values = rule.requires
+                if get(cfg, other) not in values:
+                    raise GeviError(where, f"{key}={show(value)} does nothing with {other}={show(get(cfg, other))} "
+                                           f"({rule.why})")
+            if value == get(default, key):
+                continue
+            if method is not None and rule.methods is not None and method not in rule.methods:
+                raise GeviError(where, f"{pre}does not apply to {method} ({rule.why})")
+            if kind is not None and rule.inputs is not None and (kind in TRACK_KINDS) != (rule.inputs == "tracks"):
+                raise GeviError(where, f"{pre}does not apply to {kind} sequences ({rule.why})")
 
 
 def build(cls, layers: typing.Iterable[tuple[str, dict, bool]], check: Callable[[Any, str, bool], None] | None = None):
@@ -347,11 +345,10 @@ def describe(cfg) -> list[tuple[str, object, str, object, str, str]]:
     out = []
     for key, cls, name in leaves(type(cfg)):
         info = fields(cls)[name]
-        rule = applies(cls, name)
-        where = ""
-        if rule is not None:
-            where = " ".join(x for x in (rule.methods and "/".join(rule.methods) + " only",
-                                         rule.inputs and f"{rule.inputs} only") if x)
+        where = "; ".join(x for rule in applies(cls, name)
+                          for x in (rule.methods and "/".join(rule.methods) + " only", rule.inputs and f"{rule.inputs} only",
+                                    rule.requires and f"with {rule.requires[0]}={'/'.join(map(show, rule.requires[1]))}")
+                          if x)
         help_text = info.description or ""
         out.append((key, get(cfg, key), type_name(info), info.default, domain(cls, name),
                     (f"[{where}] " if where else "") + help_text))

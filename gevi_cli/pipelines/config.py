@@ -190,10 +190,9 @@ class FusionConfig:
                            "(4-DOF step, roll/pitch from the IMU-only filter)")
     adaptive: Bool = setting(True, "estimate the gravity-prior covariance (false: spec 8's fixed-weight baseline, "
                                 "Sigma = (sigma_a / g)^2 I at the accelerometer noise floor)",
-                             applies=Applies(methods=("gevi",), requires=("fusion.mode", ("bcd",)),
-                                             why=GEVI_ONLY.format("the gravity fusion"),
-                                             requires_why="the BCD refinement's gravity prior; fusion.mode=4dof "
-                                                          "(--no-fusion) takes roll/pitch from the IMU alone"))
+                             applies=Applies(requires=("fusion.mode", ("bcd",)),
+                                             why="the BCD refinement's gravity prior; fusion.mode=4dof "
+                                                 "(--no-fusion) takes roll/pitch from the IMU alone"))
     acc_window_s: Float = setting(0.4, "acceleration compensation: remove the acceleration fitted to the tracked "
                                    "positions of the last this many seconds (s); 0: specific force only (the paper)",
                                   ge=0)
