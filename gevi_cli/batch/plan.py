@@ -54,8 +54,11 @@ def sim_for_trial(seq: SequenceEntry, trial: int) -> SimSpec | None:
 
 
 def deterministic(method: str) -> bool:
-    """The method's runs on one input are identical to the byte: CFO (no seed), not GeVI (its 3-point RANSAC)."""
-    return method == "cfo"
+    """The method's runs on one input are identical to the byte: it takes no seed (CFO; GeVI's 3-point RANSAC
+    draws from one)."""
+    from gevi_cli.pipelines.config import SEEDED_METHODS
+
+    return method not in SEEDED_METHODS
 
 
 def trials_run(m, seq: SequenceEntry) -> int:

@@ -33,6 +33,8 @@ GEVI_ONLY = "GeVI only: {} of the stereo-inertial odometry"
 RANSAC_APPLIES = Applies(values={"cfo": ("5pt", "none")}, why="3pt is GeVI's upright RANSAC, it needs the IMU's "
                                                               "roll/pitch; cfo verifies with 5pt or none")
 TRACKS_ONLY = Applies(inputs="tracks", why="the outlier flags of a track export")
+#: the methods whose runs draw from run.seed (GeVI's 3-point RANSAC); the others are identical to the byte
+SEEDED_METHODS = ("gevi",)
 #: the local BA's own settings: read only when it runs
 BA_ON = Applies(requires=("ba.enabled", (True,)), why="a setting of the local BA, which --no-ba turns off")
 
@@ -220,7 +222,7 @@ class RunConfig:
     """Run-level settings."""
 
     seed: Int = setting(0, "seed of GeVI's 3-point RANSAC: frame k draws from (seed, k), so a run is reproducible",
-                        ge=0, applies=Applies(methods=("gevi",), why="CFO's OpenCV 5-point RANSAC keeps its own "
+                        ge=0, applies=Applies(methods=SEEDED_METHODS, why="CFO's OpenCV 5-point RANSAC keeps its own "
                                                                      "fixed seed: its runs are identical to the byte"))
     align: Literal["se3", "sim3", "posyaw", "origin", "none"] = setting("se3", "alignment of the run's evaluation (se3 for stereo)")
     rpe_delta: Float = setting(1.0, "RPE delta in frames", gt=0)
