@@ -136,9 +136,9 @@ def _departure(path: Path) -> str:
         return ""
     if not rec.get("applied_px"):
         return ""
-    how = "the run restarted with it" if rec.get("restarted") else f"from frame {rec.get('applied_from_frame')}"
-    return (f"beyond the published method: a stereo disparity offset of {rec['applied_px']:+.3f} px was applied "
-            f"({how}; {path.parent / 'status.json'})")
+    from gevi_cli.pipelines.disparity_offset import describe_record
+
+    return f"beyond the published method: stereo disparity offset {describe_record(rec)} ({path.parent / 'status.json'})"
 
 
 def run_eval(*, gt_opts, estimates, results_root, gt_root, sequence_name, align, n_align, max_diff, t_offset,

@@ -268,3 +268,17 @@ class DisparityOffset:
         return {**est.as_dict(), "applied_px": float(self.applied_px), "found_at_frame": self.found_at_frame,
                 "applied_from_frame": self.applied_from_frame, "restarted": self.restarted,
                 "diagnostic_px": _num(diag.value_px), "diagnostic_steps": diag.steps}
+
+
+def describe_record(rec: dict) -> str:
+    """One line on a run's self-calibration from its record (:meth:`DisparityOffset.record`, status.json's
+    ``disparity_offset``): the estimate with its uncertainty, and what was applied from where."""
+    if rec.get("estimate_px") is None:
+        return f"no estimate ({rec.get('steps', 0)} steps counted); none applied"
+    spread = "no spread yet" if rec.get("sigma_px") is None else f"+- {rec['sigma_px']:.3f} (spread)"
+    est = (f"estimate {rec['estimate_px']:+.3f} px {spread} +- {rec['systematic_px']:.3f} (systematic) over "
+           f"{rec['keyframes']} keyframe(s)")
+    if not rec.get("applied_px"):
+        return est + "; not distinguishable from 0, none applied"
+    how = "the run restarted with it" if rec.get("restarted") else f"applied from frame {rec['applied_from_frame']}"
+    return f"{est}; {rec['applied_px']:+.3f} px applied, found at frame {rec['found_at_frame']}, {how}"

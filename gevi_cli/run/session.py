@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from gevi_cli.errors import GeviError
+from gevi_cli.pipelines.disparity_offset import describe_record
 
 
 def config_dir() -> Path:
@@ -285,7 +286,7 @@ def _execute(req: RunRequest, echo):
         echo(f"before that, a first pass of {st.first_pass['frames']} frames in {st.first_pass['elapsed_s']:.2f} s "
              "(status.json first_pass); traj_online_body.tum is not causal after the restart")
     if st.disparity_offset:
-        echo(f"stereo disparity offset: {describe_offset(st.disparity_offset)}")
+        echo(f"stereo disparity offset: {describe_record(st.disparity_offset)}")
         # what ran beyond the configuration: the offset the self-calibration applied (status.json has its evidence)
         rec = st.disparity_offset
         config_doc["self_calibration"] = {"disparity_offset_px": rec["applied_px"],
@@ -394,17 +395,3 @@ def _write_one(run_dir: Path, req: RunRequest, cfg, truth, seq_name: str, status
 def _metres(x: float) -> str:
     """Metres with 4 significant digits below 10 cm (sub-millimetre runs stay readable)."""
     return f"{x:.4f} m" if not x < 0.1 else f"{x:.4g} m"
-
-
-def describe_offset(rec: dict) -> str:
-    """One line on the self-calibrated disparity offset of a run (``status.json`` ``disparity_offset``)."""
-    if rec.get("estimate_px") is None:
-        return f"no estimate ({rec.get('steps', 0)} steps counted); none applied"
-    spread = "no spread yet" if rec.get("sigma_px") is None else f"+- {rec['sigma_px']:.3f} (spread)"
-    est = (f"estimate {rec['estimate_px']:+.3f} px {spread} +- {rec['systematic_px']:.3f} (systematic) over "
-           f"{rec['keyframes']} keyframe(s)")
-    if not rec.get("applied_px"):
-        return est + "; not distinguishable from 0, none applied"
-    how = "the run restarted with it" if rec.get("restarted") else f"applied from frame {rec['applied_from_frame']}"
-    return f"{est}; {rec['applied_px']:+.3f} px applied, found at frame {rec['found_at_frame']}, {how}"
-
