@@ -18,7 +18,7 @@ from gevi_cli.camera import Intrinsics
 from gevi_cli.datasets.calibration import StereoRig
 from gevi_cli.datasets.kalibr import yaml_real, yaml_whole
 from gevi_cli.datasets.registry import register
-from gevi_cli.datasets.sequence import ImuData, Sequence, StereoFrame, pair_stereo
+from gevi_cli.datasets.sequence import BODY_IS_IMU, ImuData, Sequence, StereoFrame, pair_stereo
 from gevi_cli.datasets.yamlio import load_yaml, matrix, require
 from gevi_cli.errors import DataError, LayoutError
 from gevi_cli.trajectory import Trajectory, read_trajectory
@@ -258,7 +258,7 @@ class EurocSequence(Sequence):
     def reference_in_imu_frame(self) -> str:
         """EuRoC's ground truth (and a render's, and a pool sequence's converted motion capture) is the pose of
         the body frame, which is the IMU's; a file given with --gt may be anything."""
-        return "" if self._gt_override is not None else "the dataset's ground truth is the body (IMU) frame's pose"
+        return "" if self._gt_override is not None else BODY_IS_IMU
 
     def _groundtruth_beside(self) -> Path | None:
         """The one body-pose file in a ``groundtruth/`` folder next to ``mav0/`` (TUM or EuRoC CSV), as copies

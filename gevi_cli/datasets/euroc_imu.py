@@ -10,6 +10,7 @@ from functools import cached_property
 from pathlib import Path
 
 from gevi_cli.datasets.euroc import read_imu
+from gevi_cli.datasets.sequence import BODY_IS_IMU
 from gevi_cli.errors import LayoutError
 from gevi_cli.trajectory import read_trajectory
 
@@ -36,7 +37,7 @@ class EurocImu:
     @property
     def reference_in_imu_frame(self) -> str:
         """The ground truth of an IMU-only EuRoC folder (gevi simulate mav) is the body (IMU) frame's pose."""
-        return "" if self._gt is not None else "the dataset's ground truth is the body (IMU) frame's pose"
+        return "" if self._gt is not None else BODY_IS_IMU
 
     @cached_property
     def groundtruth(self):

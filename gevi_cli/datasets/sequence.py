@@ -65,6 +65,9 @@ class ImuData:
 #: is a gap (gevi info, gevi imu, the bag inventory; gevi run's default of imu.max_gap_factor)
 GAP_FACTOR = 5.0
 
+#: why a reader's own ground truth needs no rotation into the IMU frame (Sequence.reference_in_imu_frame)
+BODY_IS_IMU = "the dataset's ground truth is the body (IMU) frame's pose"
+
 
 def rate_hz(t_ns: np.ndarray) -> float:
     """Nominal rate from the median sample period (robust to dropped frames)."""
