@@ -17,6 +17,17 @@ def make_pipeline(r, warn=None):
     return build(r.source, r.kind, r.cfg, r.req.method, warn=warn, start=r.start)
 
 
+def pipeline_factory(r, warn=None, first=None):
+    """A factory of (front end, odometry) for a run (``run_and_evaluate(pipeline=...)``): the first call gives
+    ``first`` (a pair already built) or builds one with ``warn``; later calls, for a restart, build fresh ones
+    quietly (their warnings were given once)."""
+    pending = [first if first is not None else make_pipeline(r, warn=warn)]
+
+    def factory():
+        return pending.pop() if pending else make_pipeline(r, warn=lambda msg: None)
+    return factory
+
+
 def build(source, kind: str, cfg, method: str, warn=None, start: int = 0):
     """(front end, odometry) for ``source``."""
     from gevi_cli.pipelines.cfo import CurrentFeatureOdometry

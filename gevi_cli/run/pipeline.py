@@ -109,7 +109,7 @@ def run_and_evaluate(resolved, status: RunStatus, sinks=(), *, pipeline=None, ru
     unusable ground truth or evaluation is recorded in the result instead."""
     import pandas as pd
 
-    from gevi_cli.run.assemble import build, make_pipeline
+    from gevi_cli.run.assemble import pipeline_factory
     from gevi_cli.run.driver import run_odometry
     from gevi_cli.run.sinks import FRAME_COLUMNS, STAGES, MemorySink, check_sink
 
@@ -124,10 +124,8 @@ def run_and_evaluate(resolved, status: RunStatus, sinks=(), *, pipeline=None, ru
 
     source, method = resolved.source, resolved.req.method
     if pipeline is None:
-        frontend, odometry = make_pipeline(resolved, warn=warn)
-        rebuild = lambda: build(source, resolved.kind, resolved.cfg, method, warn=lambda msg: None,  # noqa: E731
-                                start=resolved.start)[1]
-    elif callable(pipeline):
+        pipeline = pipeline_factory(resolved, warn)
+    if callable(pipeline):
         frontend, odometry = pipeline()
         rebuild = lambda: pipeline()[1]  # noqa: E731
     else:

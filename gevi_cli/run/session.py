@@ -228,7 +228,7 @@ def _execute(req: RunRequest, echo):
     import yaml
 
     from gevi_cli import __version__
-    from gevi_cli.run.assemble import make_pipeline
+    from gevi_cli.run.assemble import make_pipeline, pipeline_factory
     from gevi_cli.run.folder import RunStatus, make_run_dir
     from gevi_cli.run.pipeline import primary_file, run_and_evaluate
     from gevi_cli.run.sinks import FolderSink
@@ -270,14 +270,8 @@ def _execute(req: RunRequest, echo):
     echo(f"gevi run: {req.method} on {seq_name} ({kind}), frames {req.start}..{stop - 1}{strided} -> {run_dir}")
 
     folder = FolderSink(run_dir, kitti_rows, odometry.state_columns, odometry.state_file)
-    built = [(frontend, odometry)]
-
-    def pipeline():
-        """The pair built above (its warnings printed), then fresh ones for a restart."""
-        return built.pop() if built else make_pipeline(resolved, warn=lambda msg: None)
-
-    result = run_and_evaluate(resolved, status, [folder], pipeline=pipeline, run_dir=run_dir,
-                              progress=not req.quiet and sys.stderr.isatty(), warn=warn)
+    result = run_and_evaluate(resolved, status, [folder], pipeline=pipeline_factory(resolved, first=(frontend, odometry)),
+                              run_dir=run_dir, progress=not req.quiet and sys.stderr.isatty(), warn=warn)
     st = result.status
     fps = st.frames_done / st.elapsed_s if st.elapsed_s > 0 else float("nan")
     echo(f"{st.frames_tracked}/{st.frames_done} frames tracked, {st.keyframes} keyframes, "
